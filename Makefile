@@ -1,0 +1,40 @@
+# Two entry points do all set-up on a fresh machine (Python >= 3.10 and nothing else):
+#   make train   -> creates .venv on first use, then runs the main job
+#   make test    -> creates .venv on first use, then lints and runs the test suite
+# Override the torch build with e.g.  make test TORCH_SPEC="torch==2.13.0+cu128"
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+TORCH_SPEC ?=
+EXTRAS ?= dev
+STAMP := $(VENV)/.installed-$(EXTRAS)
+
+.PHONY: setup train test lint bench clean
+
+$(STAMP): pyproject.toml constraints.txt
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	@if [ -n "$(TORCH_SPEC)" ]; then \
+		echo "$(TORCH_SPEC)" > $(VENV)/constraints.txt; \
+	else \
+		cp constraints.txt $(VENV)/constraints.txt; \
+	fi
+	$(BIN)/python -m pip install --quiet -c $(VENV)/constraints.txt -e ".[$(EXTRAS)]"
+	@touch $(STAMP)
+
+setup: $(STAMP)
+
+train: $(STAMP)
+	$(BIN)/s3rl-train $(ARGS)
+
+lint: $(STAMP)
+	$(BIN)/ruff check s3rl_torchrl recipes tests benchmarks
+
+test: $(STAMP) lint
+	$(BIN)/python -m pytest -q $(ARGS)
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/env_throughput.py
+
+clean:
+	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache

@@ -1,0 +1,1 @@
+"""Replay-buffer components for safe RL (samplers stratified by the safety label)."""

@@ -1,0 +1,131 @@
+"""``make_env``: a velocity task as a TorchRL env carrying ``("next", "cost")``."""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.data import Composite, Unbounded
+from torchrl.envs import (
+    DoubleToFloat,
+    EnvBase,
+    GymEnv,
+    InitTracker,
+    ParallelEnv,
+    RewardSum,
+    SerialEnv,
+    StepCounter,
+    TransformedEnv,
+)
+from torchrl.envs.gym_like import BaseInfoDictReader
+
+from s3rl_torchrl.envs.registry import get_task
+from s3rl_torchrl.transforms import CostLabel, EpisodeSum
+
+Batching = Literal["serial", "parallel", "gym_vector"]
+BATCHING_CHOICES: tuple[str, ...] = ("serial", "parallel", "gym_vector")
+
+
+class CostInfoReader(BaseInfoDictReader):
+    """Reads ``info["cost"]`` into a float32 ``"cost"`` entry shaped like torchrl's reward.
+
+    A reset's info has no cost: it reads as 0. Gymnasium vector envs give one cost per copy.
+    """
+
+    def __init__(self, batch_size: tuple[int, ...] = ()):
+        self.batch_size = torch.Size(batch_size)
+        self._info_spec = Composite(
+            cost=Unbounded(shape=(*self.batch_size, 1), dtype=torch.float32),
+            shape=self.batch_size,
+        )
+
+    def __call__(self, info_dict: dict[str, Any], tensordict: TensorDictBase) -> TensorDictBase:
+        cost = info_dict.get("cost")
+        shape = (*tensordict.shape, 1)
+        if cost is None:
+            value = torch.zeros(shape, dtype=torch.float32, device=tensordict.device)
+        else:
+            value = torch.as_tensor(np.asarray(cost, dtype=np.float32), device=tensordict.device)
+            value = value.reshape(shape)
+        tensordict.set("cost", value)
+        return tensordict
+
+    @property
+    def info_spec(self) -> Composite:
+        return self._info_spec
+
+
+def make_base_env(task: str, device: str | torch.device = "cpu", **gym_kwargs: Any) -> GymEnv:
+    """One velocity task as a plain torchrl ``GymEnv`` with the cost read from ``info``."""
+    get_task(task)  # fail early, listing the valid names
+    # "module:id" makes Gymnasium import this package (and so register the task) first, which
+    # worker processes (ParallelEnv, Gymnasium's AsyncVectorEnv) need.
+    env = GymEnv(f"s3rl_torchrl:{task}", device=device, **gym_kwargs)
+    return env.set_info_dict_reader(CostInfoReader(env.batch_size))
+
+
+def make_env(
+    task: str,
+    num_envs: int = 1,
+    seed: int | None = None,
+    device: str | torch.device = "cpu",
+    *,
+    batching: Batching = "serial",
+    cost_label: bool = True,
+    **gym_kwargs: Any,
+) -> TransformedEnv:
+    """Build a velocity task as a TorchRL env.
+
+    Step tensordicts carry ``("next", "reward")`` and ``("next", "cost")`` (both ``[..., 1]``
+    float32), float32 ``observation``, ``step_count``, ``episode_reward``, ``episode_cost``,
+    ``is_init`` and, with ``cost_label``, the boolean ``("next", "safe")``.
+
+    Args:
+        task: a registered id, e.g. ``"SafetyHalfCheetahVelocity-v1"``
+            (see :func:`s3rl_torchrl.envs.task_names`).
+        num_envs: number of copies batched into one env (batch size ``[num_envs]``);
+            ``1`` gives an unbatched env.
+        seed: seeds the env (each copy gets its own seed derived from it).
+        device: device of the output tensordicts.
+        batching: how copies are batched when ``num_envs > 1``: ``"serial"`` (one process,
+            torchrl ``SerialEnv``; the fastest on 2 cores, see ``docs/benchmarks.md``),
+            ``"parallel"`` (torchrl ``ParallelEnv``, one worker process per copy) or
+            ``"gym_vector"`` (Gymnasium's vector env inside one ``GymEnv``).
+        cost_label: append :class:`~s3rl_torchrl.transforms.CostLabel` (``("next", "safe")``).
+        **gym_kwargs: passed to ``gymnasium.make`` (e.g. ``render_mode="rgb_array"``).
+    """
+    get_task(task)
+    if not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}.")
+    if batching not in BATCHING_CHOICES:
+        raise ValueError(
+            f"Unknown batching {batching!r}; valid choices are {', '.join(BATCHING_CHOICES)}."
+        )
+
+    base: EnvBase
+    if num_envs == 1:
+        base = make_base_env(task, device=device, **gym_kwargs)
+    elif batching == "gym_vector":
+        base = make_base_env(task, device=device, num_envs=num_envs, **gym_kwargs)
+    else:
+        create = partial(make_base_env, task, device=device, **gym_kwargs)
+        batched_cls = SerialEnv if batching == "serial" else ParallelEnv
+        base = batched_cls(num_envs, create, device=device)
+
+    env = TransformedEnv(
+        base,
+        DoubleToFloat(),
+        device=device,
+    )
+    env.append_transform(StepCounter())
+    env.append_transform(InitTracker())
+    env.append_transform(RewardSum(in_keys=["reward"], out_keys=["episode_reward"]))
+    env.append_transform(EpisodeSum(in_keys=["cost"], out_keys=["episode_cost"]))
+    if cost_label:
+        env.append_transform(CostLabel())
+    if seed is not None:
+        env.set_seed(seed)
+    return env

@@ -1,0 +1,87 @@
+"""Gymnasium envs of the Safety-Gymnasium velocity tasks, on Gymnasium's own MuJoCo robots.
+
+Safety-Gymnasium's velocity tasks are thin subclasses of Gymnasium's v4 MuJoCo envs that add a
+per-step cost; safety-gymnasium itself pins gymnasium 0.28 and mujoco 2.3, so it cannot share an
+environment with Gymnasium 1.x. We rebuild the same subclasses here: reward, termination,
+observation and info are the robot's, and ``info["cost"]`` is the speed-limit indicator.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.envs.registration import load_env_creator
+from gymnasium.utils import EzPickle
+
+from s3rl_torchrl.envs.registry import MAX_EPISODE_STEPS, TASKS, SpeedKind
+
+
+def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
+    """Safety-Gymnasium's velocity cost: 1.0 if the speed is strictly above ``threshold``.
+
+    ``speed="x"`` reads the signed forward velocity, so running backwards never costs;
+    ``speed="xy"`` reads the planar speed of the torso or centre of mass.
+    """
+    if speed == "x":
+        velocity = float(info["x_velocity"])
+    elif speed == "xy":
+        velocity = math.hypot(float(info["x_velocity"]), float(info["y_velocity"]))
+    else:
+        raise ValueError(f"Unknown speed kind {speed!r}; valid kinds are 'x' and 'xy'.")
+    # numpy scalar (a float subclass): torchrl's info reader needs a dtype.
+    return np.float64(velocity > threshold)
+
+
+class VelocityCostMixin:
+    """Adds ``info["cost"]`` to a Gymnasium MuJoCo env's ``step``; everything else is untouched."""
+
+    def __init__(self, *, cost_threshold: float, cost_speed: SpeedKind, **kwargs: Any):
+        super().__init__(**kwargs)
+        self.cost_threshold = float(cost_threshold)
+        self.cost_speed = cost_speed
+        # The robot's own EzPickle args would rebuild it without the cost arguments.
+        EzPickle.__init__(self, cost_threshold=cost_threshold, cost_speed=cost_speed, **kwargs)
+
+    def step(self, action):
+        observation, reward, terminated, truncated, info = super().step(action)
+        info["cost"] = velocity_cost(info, self.cost_threshold, self.cost_speed)
+        return observation, reward, terminated, truncated, info
+
+
+@cache
+def velocity_env_class(base_env_id: str) -> type[gym.Env]:
+    """The cost-adding subclass of the Gymnasium env registered as ``base_env_id``."""
+    base = load_env_creator(gym.spec(base_env_id).entry_point)
+    name = f"SafetyVelocity{base.__name__}_{base_env_id.split('-')[-1]}"
+    return type(name, (VelocityCostMixin, base), {"__module__": __name__})
+
+
+def make_velocity_gym_env(*, base_env_id: str, **kwargs: Any) -> gym.Env:
+    """Gymnasium entry point of every registered velocity task."""
+    return velocity_env_class(base_env_id)(**kwargs)
+
+
+# Gymnasium reads render modes from the entry point's ``metadata`` before building the env.
+make_velocity_gym_env.metadata = {"render_modes": ["human", "rgb_array", "depth_array"]}
+
+
+def register_velocity_tasks() -> None:
+    """Register every task of the registry with Gymnasium (idempotent; runs on import)."""
+    for env_id, registered in TASKS.items():
+        if env_id in gym.registry:
+            continue
+        task = registered.task
+        gym.register(
+            id=env_id,
+            entry_point=make_velocity_gym_env,
+            max_episode_steps=MAX_EPISODE_STEPS,
+            kwargs={
+                "base_env_id": task.base_env_id(registered.mujoco_version),
+                "cost_threshold": task.threshold,
+                "cost_speed": task.speed,
+            },
+        )

@@ -1,0 +1,1 @@
+"""TorchRL loss modules and Lagrangian controllers."""
