@@ -5,6 +5,7 @@ from __future__ import annotations
 from functools import partial
 from typing import Any, Literal
 
+import gymnasium as gym
 import numpy as np
 import torch
 from tensordict import TensorDictBase
@@ -13,6 +14,7 @@ from torchrl.envs import (
     DoubleToFloat,
     EnvBase,
     GymEnv,
+    GymWrapper,
     InitTracker,
     ParallelEnv,
     RewardSum,
@@ -25,8 +27,8 @@ from torchrl.envs.gym_like import BaseInfoDictReader
 from s3rl_torchrl.envs.registry import get_task
 from s3rl_torchrl.transforms import CostLabel, EpisodeSum
 
-Batching = Literal["serial", "parallel", "gym_vector"]
-BATCHING_CHOICES: tuple[str, ...] = ("serial", "parallel", "gym_vector")
+Batching = Literal["sync_vector", "async_vector", "serial", "parallel"]
+BATCHING_CHOICES: tuple[str, ...] = ("sync_vector", "async_vector", "serial", "parallel")
 
 
 class CostInfoReader(BaseInfoDictReader):
@@ -58,12 +60,36 @@ class CostInfoReader(BaseInfoDictReader):
         return self._info_spec
 
 
-def make_base_env(task: str, device: str | torch.device = "cpu", **gym_kwargs: Any) -> GymEnv:
-    """One velocity task as a plain torchrl ``GymEnv`` with the cost read from ``info``."""
+def make_base_env(
+    task: str,
+    num_envs: int = 0,
+    device: str | torch.device = "cpu",
+    *,
+    vectorization: Literal["sync", "async"] = "sync",
+    **gym_kwargs: Any,
+) -> GymWrapper:
+    """A velocity task as a plain torchrl Gym env with the cost read from ``info``.
+
+    ``num_envs=0`` wraps one Gymnasium env; ``num_envs >= 1`` wraps a Gymnasium vector env of
+    that many copies (``vectorization="sync"``: one process; ``"async"``: one process per copy).
+    Vector envs run with ``AutoresetMode.DISABLED`` so that torchrl, not Gymnasium, decides
+    when a copy resets (torchrl's own reset semantics, no lost final observation).
+    """
     get_task(task)  # fail early, listing the valid names
     # "module:id" makes Gymnasium import this package (and so register the task) first, which
     # worker processes (ParallelEnv, Gymnasium's AsyncVectorEnv) need.
-    env = GymEnv(f"s3rl_torchrl:{task}", device=device, **gym_kwargs)
+    env_id = f"s3rl_torchrl:{task}"
+    if num_envs == 0:
+        env = GymEnv(env_id, device=device, **gym_kwargs)
+    else:
+        vector_env = gym.make_vec(
+            env_id,
+            num_envs=num_envs,
+            vectorization_mode=vectorization,
+            vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.DISABLED},
+            **gym_kwargs,
+        )
+        env = GymWrapper(vector_env, device=device)
     return env.set_info_dict_reader(CostInfoReader(env.batch_size))
 
 
@@ -73,7 +99,7 @@ def make_env(
     seed: int | None = None,
     device: str | torch.device = "cpu",
     *,
-    batching: Batching = "serial",
+    batching: Batching = "sync_vector",
     cost_label: bool = True,
     **gym_kwargs: Any,
 ) -> TransformedEnv:
@@ -90,10 +116,11 @@ def make_env(
             ``1`` gives an unbatched env.
         seed: seeds the env (each copy gets its own seed derived from it).
         device: device of the output tensordicts.
-        batching: how copies are batched when ``num_envs > 1``: ``"serial"`` (one process,
-            torchrl ``SerialEnv``; the fastest on 2 cores, see ``docs/benchmarks.md``),
-            ``"parallel"`` (torchrl ``ParallelEnv``, one worker process per copy) or
-            ``"gym_vector"`` (Gymnasium's vector env inside one ``GymEnv``).
+        batching: how copies are batched when ``num_envs > 1``: ``"sync_vector"`` (default:
+            Gymnasium's ``SyncVectorEnv`` in one torchrl env, one process; the fastest on
+            2 cores, see ``docs/benchmarks.md``), ``"async_vector"`` (Gymnasium's
+            ``AsyncVectorEnv``, one process per copy), ``"serial"`` (torchrl ``SerialEnv``) or
+            ``"parallel"`` (torchrl ``ParallelEnv``, one worker process per copy).
         cost_label: append :class:`~s3rl_torchrl.transforms.CostLabel` (``("next", "safe")``).
         **gym_kwargs: passed to ``gymnasium.make`` (e.g. ``render_mode="rgb_array"``).
     """
@@ -108,8 +135,9 @@ def make_env(
     base: EnvBase
     if num_envs == 1:
         base = make_base_env(task, device=device, **gym_kwargs)
-    elif batching == "gym_vector":
-        base = make_base_env(task, device=device, num_envs=num_envs, **gym_kwargs)
+    elif batching in ("sync_vector", "async_vector"):
+        vectorization = "sync" if batching == "sync_vector" else "async"
+        base = make_base_env(task, num_envs, device, vectorization=vectorization, **gym_kwargs)
     else:
         create = partial(make_base_env, task, device=device, **gym_kwargs)
         batched_cls = SerialEnv if batching == "serial" else ParallelEnv

@@ -1,1 +1,13 @@
 """Network builders: the S3RL actor (policy encoder + Gaussian head) and the critics."""
+
+from s3rl_torchrl.modules.actor import (  # noqa: F401
+    GaussianHead,
+    PolicyEncoder,
+    build_s3rl_actor,
+    get_policy_encoder,
+)
+from s3rl_torchrl.modules.contrastive import ContrastivePhase  # noqa: F401
+from s3rl_torchrl.modules.critics import (  # noqa: F401
+    build_cost_qvalue_network,
+    build_qvalue_network,
+)

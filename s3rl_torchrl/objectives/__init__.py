@@ -1,1 +1,22 @@
 """TorchRL loss modules and Lagrangian controllers."""
+
+from s3rl_torchrl.objectives.infonce import (  # noqa: F401
+    SafetyInfoNCELoss,
+    infonce_logits,
+    infonce_loss,
+)
+from s3rl_torchrl.objectives.lagrangian import (  # noqa: F401
+    LagrangianController,
+    LearnedLagrangian,
+    PIDLagrangian,
+)
+from s3rl_torchrl.objectives.nstep import (  # noqa: F401
+    NStepTransform,
+    make_nstep_transform,
+    nstep_transition,
+)
+from s3rl_torchrl.objectives.sac_lag import (  # noqa: F401
+    SACLagLoss,
+    SACLagOptimizers,
+    make_sac_lag_optimizers,
+)

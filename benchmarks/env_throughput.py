@@ -1,0 +1,93 @@
+"""Env steps per second: raw Gymnasium vs ``make_env`` with 1 and 10 copies.
+
+    python benchmarks/env_throughput.py [--frames 5000] [--tasks ...] [--out benchmarks/results/env_throughput.json]
+
+Random actions; a "step" is one transition of one env copy (frames). Results go to a JSON file
+and a Markdown table on stdout (pasted into docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+import s3rl_torchrl  # noqa: F401  (registers the tasks)
+from s3rl_torchrl.envs import make_env
+
+ROBOTS = ["HalfCheetah", "Hopper", "Walker2d", "Swimmer", "Ant", "Humanoid"]
+
+
+def raw_gymnasium(task: str, frames: int) -> float:
+    env = gym.make(task)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(
+        env.action_space.low, env.action_space.high, (frames, *env.action_space.shape)
+    )
+    actions = actions.astype(np.float32)
+    start = time.perf_counter()
+    for action in actions:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+    return frames / (time.perf_counter() - start)
+
+
+def torchrl_env(task: str, frames: int, num_envs: int, batching: str) -> float:
+    env = make_env(task, num_envs=num_envs, seed=0, batching=batching)
+    env.rollout(10, break_when_any_done=False)  # warm-up (spec caches, worker start)
+    steps = max(1, frames // num_envs)
+    start = time.perf_counter()
+    env.rollout(steps, break_when_any_done=False)
+    elapsed = time.perf_counter() - start
+    env.close()
+    return steps * num_envs / elapsed
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=5000)
+    parser.add_argument("--tasks", nargs="*", default=[f"Safety{r}Velocity-v1" for r in ROBOTS])
+    parser.add_argument("--batchings", nargs="*", default=["sync_vector", "serial", "async_vector", "parallel"])
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/env_throughput.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    rows = []
+    for task in args.tasks:
+        row = {"task": task, "raw_gymnasium": raw_gymnasium(task, args.frames)}
+        row["make_env_1"] = torchrl_env(task, args.frames, 1, "serial")
+        for batching in args.batchings:
+            row[f"make_env_10_{batching}"] = torchrl_env(task, args.frames, 10, batching)
+        rows.append(row)
+        print(json.dumps({k: round(v) if isinstance(v, float) else v for k, v in row.items()}))
+
+    result = {
+        "command": "python benchmarks/env_throughput.py "
+        + " ".join(f"--{k} {v}" for k, v in [("frames", args.frames)]),
+        "machine": {
+            "cpus": torch.get_num_threads(),
+            "platform": platform.platform(),
+            "torch": torch.__version__,
+        },
+        "unit": "env steps (frames) per second",
+        "rows": rows,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2))
+    columns = [c for c in rows[0] if c != "task"]
+    print("\n| task | " + " | ".join(columns) + " |")
+    print("|---" * (len(columns) + 1) + "|")
+    for row in rows:
+        print(f"| {row['task']} | " + " | ".join(f"{row[c]:,.0f}" for c in columns) + " |")
+
+
+if __name__ == "__main__":
+    main()

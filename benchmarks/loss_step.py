@@ -1,0 +1,189 @@
+"""Milliseconds per full SAC / SAC-Lagrangian gradient step, eager and ``torch.compile``d.
+
+    python benchmarks/loss_step.py [--steps 50] [--rounds 7] [--threads 2] \
+        [--envs halfcheetah humanoid] [--modes eager compile] \
+        [--out benchmarks/results/loss_step.json]
+
+One step = loss forward on a batch of 256, backward of the summed ``loss_*`` entries, one Adam
+step each for actor, critics and alpha (paper learning rates), and ``SoftUpdate(tau=0.05)``.
+Actor: ``build_s3rl_actor`` (128x128); critics: ``build_qvalue_network`` (128x128), a double
+reward critic, and for SAC-Lag one double cost critic (one cost). Variants:
+
+- ``sac``: torchrl ``SACLoss`` (loss_function="l2", alpha_init=0.005, like SACLagLoss);
+- ``sac_lag``: ``SACLagLoss`` with reward and cost critics in one vmapped call (default);
+- ``sac_lag_unfused``: ``SACLagLoss(fuse_critics=False)``: two vmapped calls.
+
+Variants are timed in interleaved rounds (each round runs every variant for ``--steps`` steps)
+so that load from other processes hits all of them alike; the reported time is the median over
+rounds. ``compile`` wraps the loss module in ``torch.compile`` (default mode); its compile time
+is the wall time of the first three steps minus three median steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+import torch
+from tensordict import TensorDict
+from torchrl.data import Bounded
+from torchrl.objectives import SACLoss, SoftUpdate
+
+from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network, build_s3rl_actor
+from s3rl_torchrl.objectives import SACLagLoss, make_sac_lag_optimizers
+
+ENVS = {"halfcheetah": (17, 6), "humanoid": (376, 17)}
+VARIANTS = ("sac", "sac_lag", "sac_lag_unfused")
+BATCH = 256
+HIDDEN = (128, 128)
+
+
+def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
+    g = torch.Generator().manual_seed(0)
+    return TensorDict(
+        {
+            "observation": torch.randn(batch, obs_dim, generator=g),
+            "action": torch.rand(batch, act_dim, generator=g) * 2 - 1,
+            "steps_to_next_obs": torch.full((batch,), 2, dtype=torch.long),
+            "next": {
+                "observation": torch.randn(batch, obs_dim, generator=g),
+                "reward": torch.randn(batch, 1, generator=g),
+                "cost": (torch.rand(batch, 1, generator=g) > 0.7).float(),
+                "done": torch.zeros(batch, 1, dtype=torch.bool),
+                "terminated": torch.zeros(batch, 1, dtype=torch.bool),
+            },
+        },
+        [batch],
+    )
+
+
+def make_loss(variant: str, obs_dim: int, act_dim: int):
+    spec = Bounded(-torch.ones(act_dim), torch.ones(act_dim), (act_dim,))
+    actor = build_s3rl_actor(obs_dim, spec, HIDDEN)
+    critics = [build_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
+    if variant == "sac":
+        loss = SACLoss(actor, critics, loss_function="l2", alpha_init=0.005)
+    else:
+        costs = [build_cost_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
+        loss = SACLagLoss(
+            actor, critics, costs, num_costs=1, fuse_critics=variant == "sac_lag"
+        )
+        loss.lagrangian = 0.3
+    loss.make_value_estimator(gamma=0.99)
+    return loss
+
+
+class Stepper:
+    """One full gradient step of one loss; eager or with the loss forward compiled."""
+
+    def __init__(self, variant: str, obs_dim: int, act_dim: int, compiled: bool):
+        torch.manual_seed(0)
+        self.loss = make_loss(variant, obs_dim, act_dim)
+        self.optimizers = [o for o in make_sac_lag_optimizers(self.loss) if o is not None]
+        self.updater = SoftUpdate(self.loss, tau=0.05)
+        self.forward = torch.compile(self.loss) if compiled else self.loss
+        self.batch = make_batch(obs_dim, act_dim)
+
+    def step(self) -> None:
+        out = self.forward(self.batch)
+        total = sum(value for key, value in out.items() if key.startswith("loss_"))
+        total.backward()
+        for optimizer in self.optimizers:
+            optimizer.step()
+            optimizer.zero_grad(set_to_none=True)
+        self.updater.step()
+
+
+def timed(fn, n: int) -> float:
+    start = time.perf_counter()
+    for _ in range(n):
+        fn()
+    return (time.perf_counter() - start) / n * 1e3
+
+
+def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
+    obs_dim, act_dim = ENVS[env]
+    compiled = mode == "compile"
+    steppers, warmup_s = {}, {}
+    for variant in variants:
+        stepper = Stepper(variant, obs_dim, act_dim, compiled)
+        start = time.perf_counter()
+        for _ in range(3):  # the first calls compile (and may recompile once)
+            stepper.step()
+        warmup_s[variant] = time.perf_counter() - start
+        for _ in range(5):
+            stepper.step()
+        steppers[variant] = stepper
+    samples = {variant: [] for variant in variants}
+    for _ in range(rounds):
+        for variant in variants:
+            samples[variant].append(timed(steppers[variant].step, steps))
+    result = {}
+    for variant in variants:
+        median = statistics.median(samples[variant])
+        entry = {
+            "ms_per_step": round(median, 3),
+            "ms_per_step_rounds": [round(s, 3) for s in samples[variant]],
+        }
+        if compiled:
+            entry["compile_s"] = round(warmup_s[variant] - 3 * median / 1e3, 2)
+        result[variant] = entry
+    if "sac" in result:
+        for variant in variants:
+            if variant != "sac":
+                ratio = result[variant]["ms_per_step"] / result["sac"]["ms_per_step"]
+                result[variant]["ratio_to_sac"] = round(ratio, 3)
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=50, help="steps per round and variant")
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--envs", nargs="*", default=list(ENVS), choices=list(ENVS))
+    parser.add_argument("--modes", nargs="*", default=["eager", "compile"], choices=["eager", "compile"])
+    parser.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=list(VARIANTS))
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/loss_step.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+
+    load_before = os.getloadavg()
+    results = {}
+    for env in args.envs:
+        for mode in args.modes:
+            res = bench(env, mode, args.variants, args.steps, args.rounds)
+            results.setdefault(env, {})[mode] = res
+            for variant, entry in res.items():
+                extra = f"  compile {entry['compile_s']} s" if "compile_s" in entry else ""
+                ratio = f"  x{entry['ratio_to_sac']}" if "ratio_to_sac" in entry else ""
+                print(f"{env:12s} {mode:8s} {variant:16s} {entry['ms_per_step']:8.2f} ms{ratio}{extra}",
+                      flush=True)
+    payload = {
+        "command": "python benchmarks/loss_step.py " + " ".join(
+            f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
+            for k, v in vars(args).items()
+        ),
+        "batch": BATCH,
+        "hidden": list(HIDDEN),
+        "threads": args.threads,
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "loadavg_before": [round(x, 2) for x in load_before],
+        "loadavg_after": [round(x, 2) for x in os.getloadavg()],
+        "results": results,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(payload, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Hydra entry points (thin): ``s3rl-train`` and ``s3rl-eval``."""

@@ -1,0 +1,613 @@
+"""SAC-Lagrangian loss (FSRL's SACLagrangian, the base of S3RL) as a torchrl ``SACLoss`` subclass.
+
+For ``m >= 1`` costs read from ``("next", "cost")`` (trailing dimension ``m``), with one double
+reward critic ``Q_0j`` and one double cost critic ``Q_ij`` per cost ``i``:
+
+    y_0 = r^(n) + gamma^k (1 - terminated) [min_j Q'_0j(s', a') - alpha log pi(a'|s')]
+    y_i = c_i^(n) + gamma^k (1 - terminated) [min_j Q'_ij(s', a') - alpha log pi(a'|s')]
+    L_pi = mean(alpha log pi(a|s) - min_j Q_0j(s, a)) + sum_i lambda_i mean(min_j Q_ij(s, a))
+    L_pi = L_pi / (1 + sum_i lambda_i)                                  (rescaling)
+
+with ``r^(n)``, ``c^(n)``, ``s'`` and ``k = steps_to_next_obs`` from
+:func:`~s3rl_torchrl.objectives.make_nstep_transform` (1-step data works too: ``k`` defaults to
+1). The entropy term in ``y_i`` is the ``entropy_in_cost_target`` switch (FSRL and the paper: on).
+``a'`` is one sample shared by all targets and ``a`` one reparameterised sample shared by the
+reward and cost terms of the actor loss.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, NamedTuple
+
+import torch
+from tensordict import TensorDict, TensorDictBase, TensorDictParams
+from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, dispatch
+from tensordict.utils import NestedKey
+from torch import Tensor
+from torchrl.data.tensor_specs import TensorSpec
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.objectives.sac import SACLoss, compute_rsample_log_prob
+from torchrl.objectives.utils import ValueEstimators, _vmap_func, distance_loss
+
+__all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers"]
+
+_LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
+_FUSE_CHOICES = ("auto", True, False)
+
+
+def _next(key: NestedKey) -> tuple[str, ...]:
+    return ("next", *key) if isinstance(key, tuple) else ("next", key)
+
+
+def _is_module_list(module) -> bool:
+    return isinstance(module, (list, tuple))
+
+
+class SACLagLoss(SACLoss):
+    r"""SAC with Lagrangian cost penalties (FSRL's SAC-Lag), TensorDict-native.
+
+    A subclass of :class:`torchrl.objectives.SACLoss` (version 2, no value network) that adds one
+    double cost critic per cost, n-step reward and cost targets masked on ``terminated`` only, and
+    the Lagrangian actor loss (module docstring). ``lagrangian`` is a buffer of shape ``[m]``
+    set from outside, typically by a :class:`~s3rl_torchrl.objectives.PIDLagrangian` once per
+    collect: ``loss.lagrangian = controller.update(mean_episode_cost)``.
+
+    With ``lagrangian = 0`` the actor, reward-critic and alpha losses equal ``SACLoss``'s on the
+    same networks, batch and random state; with ``cost_qvalue_network=None`` (no cost critics)
+    the whole loss is ``SACLoss``.
+
+    Args:
+        actor_network: stochastic actor (e.g. ``ProbabilisticActor`` with ``TanhNormal``).
+        qvalue_network: reward critic ``[observation, action] -> "state_action_value"``
+            (``[..., 1]``); one module (copied ``num_qvalue_nets`` times, copies resampled by
+            torchrl) or a list of ``num_qvalue_nets`` modules (each keeps its own init).
+        cost_qvalue_network: cost critic ``[observation, action] -> "state_action_cost_value"``
+            (``[..., 1]``, one cost per network); one module (copied ``num_qvalue_nets *
+            num_costs`` times) or a list of that many modules ordered ``[cost 0 net 0, cost 0
+            net 1, cost 1 net 0, ...]``. ``None`` gives unconstrained SAC.
+
+    Keyword Args:
+        num_costs: number of cost signals ``m`` (trailing dimension of ``("next", "cost")``).
+            Defaults to 1 with a cost critic and 0 without.
+        num_qvalue_nets: critics per signal (2: double Q as in FSRL).
+        loss_function: critic regression loss, one of ``"l2"`` (FSRL: squared error, summed
+            over the critics), ``"l1"``, ``"smooth_l1"`` (``SACLoss``'s default).
+        alpha_init: initial entropy coefficient, also when it is auto-tuned (paper: 0.005).
+        min_alpha, max_alpha, action_spec, fixed_alpha, target_entropy: as in ``SACLoss``
+            (``target_entropy="auto"`` is ``-action_dim``).
+        delay_qvalue: keep target critics (updated by ``SoftUpdate``); both reward and cost.
+        entropy_in_cost_target: subtract ``alpha log pi(a'|s')`` in the cost targets (FSRL and
+            the paper: ``True``; OmniSafe: ``False``).
+        rescaling: divide the whole actor loss by ``1 + sum(lagrangian)`` (FSRL/paper: ``True``).
+        lagrangian_init: initial ``lagrangian`` (float or ``m`` values, >= 0).
+        fuse_critics: evaluate the reward and cost critics in one vmapped call. ``"auto"``
+            fuses when the two critics have the same architecture (measured faster, see
+            ``docs/objectives.md``); ``True`` requires it; ``False`` never fuses.
+        separate_losses, reduction, deactivate_vmap, use_prioritized_weights,
+            scalar_output_mode: as in ``SACLoss``.
+
+    Keys (``loss.set_keys(...)``): those of ``SACLoss`` plus ``cost`` (read at
+    ``("next", cost)``, default ``"cost"``), ``state_action_cost_value`` (the cost critic's
+    output) and ``steps_to_next_obs`` (root entry, default ``"steps_to_next_obs"``).
+
+    The forward returns ``loss_actor``, ``loss_qvalue`` (reward critics), ``loss_cost_qvalue``
+    (cost critics) and ``loss_alpha``, whose sum is what to minimise, and the diagnostics
+    ``reward_q`` (mean over the batch of ``min_j Q_0j(s, a~pi)``), ``cost_q`` (``[m]``, the same
+    for each cost), ``lagrangian`` (``[m]``), ``entropy`` and ``alpha``.
+
+    The discount is set, as for every torchrl loss, with ``loss.make_value_estimator(gamma=...)``
+    (only TD(0) is supported: n-step returns come from the replay buffer transform).
+    """
+
+    @dataclass
+    class _AcceptedKeys(SACLoss._AcceptedKeys):
+        """Tensordict keys of :class:`SACLagLoss`: ``SACLoss``'s plus the cost ones.
+
+        Attributes:
+            cost: cost entry, read at ``("next", cost)``, trailing dimension ``num_costs``.
+            state_action_cost_value: output key of the cost critic.
+            steps_to_next_obs: root entry with the number of steps between the observation
+                and the bootstrap observation (written by the n-step transform).
+        """
+
+        cost: NestedKey = "cost"
+        state_action_cost_value: NestedKey = "state_action_cost_value"
+        steps_to_next_obs: NestedKey = "steps_to_next_obs"
+
+    default_keys = _AcceptedKeys
+    tensor_keys: _AcceptedKeys
+    SUPPORTED_VALUE_ESTIMATORS = (ValueEstimators.TD0,)
+    _schedulable_buffers = frozenset(SACLoss._schedulable_buffers | {"lagrangian"})
+
+    cost_qvalue_network: TensorDictModule
+    cost_qvalue_network_params: TensorDictParams
+    target_cost_qvalue_network_params: TensorDictParams
+
+    def __init__(
+        self,
+        actor_network: ProbabilisticTensorDictSequential,
+        qvalue_network: TensorDictModule | list[TensorDictModule],
+        cost_qvalue_network: TensorDictModule | list[TensorDictModule] | None = None,
+        *,
+        num_costs: int | None = None,
+        num_qvalue_nets: int = 2,
+        loss_function: str = "l2",
+        alpha_init: float = 0.005,
+        min_alpha: float | None = None,
+        max_alpha: float | None = None,
+        action_spec: TensorSpec | None = None,
+        fixed_alpha: bool = False,
+        target_entropy: str | float = "auto",
+        delay_qvalue: bool = True,
+        entropy_in_cost_target: bool = True,
+        rescaling: bool = True,
+        lagrangian_init: float | Sequence[float] | Tensor = 0.0,
+        fuse_critics: bool | Literal["auto"] = "auto",
+        separate_losses: bool = False,
+        reduction: str | None = None,
+        deactivate_vmap: bool = False,
+        use_prioritized_weights: str | bool = "auto",
+        scalar_output_mode: str | None = None,
+    ) -> None:
+        if num_costs is None:
+            num_costs = 0 if cost_qvalue_network is None else 1
+        if isinstance(num_costs, bool) or not isinstance(num_costs, int) or num_costs < 0:
+            raise ValueError(f"num_costs must be an integer >= 0, got {num_costs!r}.")
+        if cost_qvalue_network is None and num_costs > 0:
+            raise ValueError(
+                f"num_costs={num_costs} needs a cost_qvalue_network; pass one, or num_costs=0 "
+                "(unconstrained SAC)."
+            )
+        if cost_qvalue_network is not None and num_costs == 0:
+            raise ValueError("num_costs=0 means no cost critic, but a cost_qvalue_network was given.")
+        if isinstance(num_qvalue_nets, bool) or not isinstance(num_qvalue_nets, int):
+            raise ValueError(f"num_qvalue_nets must be an integer >= 1, got {num_qvalue_nets!r}.")
+        if num_qvalue_nets < 1:
+            raise ValueError(f"num_qvalue_nets must be an integer >= 1, got {num_qvalue_nets!r}.")
+        if loss_function not in _LOSS_FUNCTIONS:
+            raise ValueError(
+                f"Unknown loss_function {loss_function!r}; valid choices are "
+                f"{', '.join(_LOSS_FUNCTIONS)}."
+            )
+        if fuse_critics not in _FUSE_CHOICES or not isinstance(fuse_critics, (bool, str)):
+            raise ValueError(
+                f"Unknown fuse_critics {fuse_critics!r}; valid choices are 'auto', True, False."
+            )
+        if not (alpha_init > 0 and math.isfinite(alpha_init)):
+            raise ValueError(f"alpha_init must be a positive finite number, got {alpha_init!r}.")
+        if reduction is not None and reduction not in ("mean", "sum", "none"):
+            raise ValueError(
+                f"Unknown reduction {reduction!r}; valid choices are 'mean', 'sum', 'none'."
+            )
+        if _is_module_list(cost_qvalue_network) and len(cost_qvalue_network) != (
+            num_qvalue_nets * num_costs
+        ):
+            raise ValueError(
+                f"cost_qvalue_network is a list of {len(cost_qvalue_network)} modules; with "
+                f"num_costs={num_costs} and num_qvalue_nets={num_qvalue_nets} it must hold "
+                f"{num_qvalue_nets * num_costs} (one per cost and critic), or pass one module."
+            )
+        if _is_module_list(qvalue_network) and len(qvalue_network) != num_qvalue_nets:
+            raise ValueError(
+                f"qvalue_network is a list of {len(qvalue_network)} modules; it must hold "
+                f"num_qvalue_nets={num_qvalue_nets}, or pass one module."
+            )
+        super().__init__(
+            actor_network,
+            qvalue_network,
+            None,
+            num_qvalue_nets=num_qvalue_nets,
+            loss_function=loss_function,
+            alpha_init=alpha_init,
+            min_alpha=min_alpha,
+            max_alpha=max_alpha,
+            action_spec=action_spec,
+            fixed_alpha=fixed_alpha,
+            target_entropy=target_entropy,
+            delay_actor=False,
+            delay_qvalue=delay_qvalue,
+            separate_losses=separate_losses,
+            reduction=reduction,
+            deactivate_vmap=deactivate_vmap,
+            use_prioritized_weights=use_prioritized_weights,
+            scalar_output_mode=scalar_output_mode,
+        )
+        self.num_costs = num_costs
+        self.entropy_in_cost_target = bool(entropy_in_cost_target)
+        self.rescaling = bool(rescaling)
+        self.register_buffer(
+            "lagrangian", torch.zeros(num_costs, device=self.log_alpha.device)
+        )
+        self.set_lagrangian(lagrangian_init)
+
+        if num_costs > 0:
+            policy_params = list(actor_network.parameters()) if separate_losses else None
+            self.convert_to_functional(
+                cost_qvalue_network,
+                "cost_qvalue_network",
+                num_qvalue_nets * num_costs,
+                create_target_params=delay_qvalue,
+                compare_against=policy_params,
+            )
+            fusable = self._critics_fusable()
+            if fuse_critics is True and not fusable:
+                raise ValueError(
+                    "fuse_critics=True needs reward and cost critics with the same architecture "
+                    "and input keys; pass fuse_critics='auto' or False."
+                )
+            self._fused = fusable and fuse_critics in ("auto", True)
+        else:
+            self.cost_qvalue_network = None
+            self._fused = False
+        self._make_cost_vmap()
+
+    # ------------------------------------------------------------------ configuration
+    def _critics_fusable(self) -> bool:
+        reward, cost = self.qvalue_network, self.cost_qvalue_network
+        if list(reward.in_keys) != list(cost.in_keys) or len(reward.out_keys) != 1:
+            return False
+        inner_r, inner_c = getattr(reward, "module", reward), getattr(cost, "module", cost)
+        if type(inner_r) is not type(inner_c) or repr(inner_r) != repr(inner_c):
+            return False
+        params_r = self.qvalue_network_params.flatten_keys()
+        params_c = self.cost_qvalue_network_params.flatten_keys()
+        if set(params_r.keys()) != set(params_c.keys()):
+            return False
+        return all(
+            params_r[k].shape[1:] == params_c[k].shape[1:]
+            and params_r[k].dtype == params_c[k].dtype
+            for k in params_r.keys()
+        )
+
+    @property
+    def fused_critics(self) -> bool:
+        """Whether reward and cost critics are evaluated in one vmapped call."""
+        return self._fused
+
+    def _make_cost_vmap(self) -> None:
+        if getattr(self, "num_costs", 0) > 0:
+            self._vmap_cost_qnetworkN0 = _vmap_func(
+                self.cost_qvalue_network,
+                (None, 0),
+                randomness=self.vmap_randomness,
+                pseudo_vmap=self.deactivate_vmap,
+            )
+
+    def _make_vmap(self):
+        super()._make_vmap()
+        # SACLoss.__init__ calls this before the cost critic exists.
+        if "cost_qvalue_network" in self.__dict__:
+            self._make_cost_vmap()
+
+    # ------------------------------------------------------------------ lagrangian
+    def set_lagrangian(self, value: float | Sequence[float] | Tensor) -> None:
+        """Set the multipliers in place: a number (same for every cost) or ``num_costs`` values."""
+        buffer = self._buffers["lagrangian"]
+        if isinstance(value, Tensor):
+            value = value.detach().to(device=buffer.device, dtype=buffer.dtype)
+        else:
+            value = torch.as_tensor(value, dtype=buffer.dtype, device=buffer.device)
+        if value.ndim == 0:
+            value = value.expand(self.num_costs)
+        if value.shape != buffer.shape:
+            raise ValueError(
+                f"lagrangian must be a number or {self.num_costs} values (one per cost), got "
+                f"shape {tuple(value.shape)}."
+            )
+        if not bool(torch.isfinite(value).all()) or bool((value < 0).any()):
+            raise ValueError(f"lagrangian must be finite and >= 0, got {value.tolist()}.")
+        buffer.copy_(value)
+
+    def __setattr__(self, name, value):
+        if name == "lagrangian" and "lagrangian" in self.__dict__.get("_buffers", {}):
+            self.set_lagrangian(value)
+            return
+        super().__setattr__(name, value)
+
+    # ------------------------------------------------------------------ keys
+    def _forward_value_estimator_keys(self, **kwargs) -> None:
+        super()._forward_value_estimator_keys(**kwargs)
+        self._set_in_keys()
+
+    def _set_in_keys(self):
+        super()._set_in_keys()
+        keys = set(self._in_keys)
+        if getattr(self, "num_costs", 0) > 0:
+            keys.add(_next(self.tensor_keys.cost))
+            keys.update(self.cost_qvalue_network.in_keys)
+        self._in_keys = list(keys)
+
+    @property
+    def out_keys(self):
+        if self._out_keys is None:
+            self._out_keys = [
+                "loss_actor",
+                "loss_qvalue",
+                "loss_cost_qvalue",
+                "loss_alpha",
+                "alpha",
+                "entropy",
+                "reward_q",
+                "cost_q",
+                "lagrangian",
+            ]
+        return self._out_keys
+
+    @out_keys.setter
+    def out_keys(self, values):
+        self._out_keys = values
+
+    # ------------------------------------------------------------------ critic evaluation
+    def _critics(
+        self, td: TensorDictBase, reward_params: TensorDictBase, cost_params: TensorDictBase | None
+    ) -> tuple[Tensor, Tensor | None]:
+        """All critics on ``td``: reward ``[N, *B]`` and cost ``[m, N, *B]`` values."""
+        n, m = self.num_qvalue_nets, self.num_costs
+        value_key = self.tensor_keys.state_action_value
+        if self._fused:
+            params = torch.cat([reward_params, cost_params], 0)
+            values = self._vmap_qnetworkN0(td, params).get(value_key).squeeze(-1)
+            return values[:n], values[n:].unflatten(0, (m, n))
+        reward = self._vmap_qnetworkN0(td, reward_params).get(value_key).squeeze(-1)
+        if m == 0:
+            return reward, None
+        td_cost = td.select(*self.cost_qvalue_network.in_keys, strict=False)
+        cost = self._vmap_cost_qnetworkN0(td_cost, cost_params)
+        cost = cost.get(self.tensor_keys.state_action_cost_value).squeeze(-1)
+        return reward, cost.unflatten(0, (m, n))
+
+    def _critic_input(self, tensordict: TensorDictBase) -> TensorDictBase:
+        keys = list(self.qvalue_network.in_keys)
+        if self.num_costs and not self._fused:
+            keys += list(self.cost_qvalue_network.in_keys)
+        return tensordict.select(*keys, strict=False)
+
+    def _get_cost(self, tensordict: TensorDictBase) -> Tensor:
+        key = _next(self.tensor_keys.cost)
+        cost = tensordict.get(key, None)
+        if cost is None:
+            raise KeyError(
+                f"SACLagLoss with num_costs={self.num_costs} needs the cost entry {key}; set it "
+                "with loss.set_keys(cost=...)."
+            )
+        expected = (*tensordict.batch_size, self.num_costs)
+        if tuple(cost.shape) != expected:
+            raise ValueError(
+                f"SACLagLoss was built with num_costs={self.num_costs}: {key} must have shape "
+                f"{expected} (batch + one entry per cost), got {tuple(cost.shape)}."
+            )
+        return cost
+
+    # ------------------------------------------------------------------ targets
+    def compute_targets(self, tensordict: TensorDictBase) -> tuple[Tensor, Tensor]:
+        """Critic targets: reward ``[*B]`` and costs ``[*B, m]`` (no gradient).
+
+        ``y = R + gamma ** steps_to_next_obs * (1 - terminated) * V'(s')`` with ``R`` the
+        (n-step) reward/cost, ``s' = ("next", "observation")`` and
+        ``V'_i = min_j Q'_ij(s', a') - alpha log pi(a'|s')`` (costs: entropy term only with
+        ``entropy_in_cost_target``); one action ``a' ~ pi(.|s')`` shared by all targets.
+        """
+        keys = self.tensor_keys
+        batch_size = tensordict.batch_size
+        reward = tensordict.get(_next(keys.reward))
+        cost = self._get_cost(tensordict) if self.num_costs else None
+        with torch.no_grad():
+            with (
+                set_exploration_type(ExplorationType.RANDOM),
+                self.actor_network_params.to_module(
+                    self.actor_network, preserve_module_state=False
+                ),
+            ):
+                next_td = tensordict.get("next").copy()
+                next_dist = self.actor_network.get_dist(next_td)
+                next_action, next_log_prob = compute_rsample_log_prob(next_dist)
+            next_td.set(keys.action, next_action)
+            q_reward, q_cost = self._critics(
+                self._critic_input(next_td),
+                self.target_qvalue_network_params,
+                self.target_cost_qvalue_network_params if self.num_costs else None,
+            )
+            entropy_term = self._alpha * next_log_prob
+            # SACLoss takes the min after subtracting alpha*log_pi; keep its order.
+            next_value = (q_reward - entropy_term).min(0)[0].unsqueeze(-1)
+            rewards = reward.reshape(*batch_size, 1)
+            if q_cost is not None:
+                if self.entropy_in_cost_target:
+                    q_cost = q_cost - entropy_term
+                next_cost_value = q_cost.min(1)[0].movedim(0, -1)
+                next_value = torch.cat([next_value, next_cost_value], -1)
+                rewards = torch.cat([rewards, cost.to(rewards.dtype)], -1)
+            target = self._td0(tensordict, rewards, next_value)
+        return target[..., 0], target[..., 1:]
+
+    def _td0(self, tensordict: TensorDictBase, rewards: Tensor, next_value: Tensor) -> Tensor:
+        """torchrl's TD(0) estimate for several signals at once (one column per signal)."""
+        keys = self.tensor_keys
+        estimator = self.value_estimator
+        est_keys = estimator.tensor_keys
+        terminated = tensordict.get(_next(keys.terminated), None)
+        done = tensordict.get(_next(keys.done), None)
+        if terminated is None:
+            terminated = done
+        if terminated is None:
+            raise KeyError(f"SACLagLoss needs {_next(keys.terminated)} in the batch.")
+        shape = rewards.shape
+        flags = terminated.reshape(*tensordict.batch_size, 1).expand(shape)
+        # TD(0) reads only `terminated` when it is present; `done` is there for its key checks.
+        entries = {
+            _next(est_keys.reward): rewards,
+            _next(est_keys.terminated): flags,
+            _next(est_keys.done): flags,
+        }
+        steps = tensordict.get(keys.steps_to_next_obs, None)
+        if steps is not None:
+            entries[est_keys.steps_to_next_obs] = steps.reshape(
+                *tensordict.batch_size, 1
+            ).expand(shape)
+        td = TensorDict(entries, batch_size=tensordict.batch_size, device=rewards.device)
+        return estimator.value_estimate(td, next_value=next_value)
+
+    # ------------------------------------------------------------------ losses
+    def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[Tensor, dict[str, Tensor]]:
+        """Reward-critic loss; the cost-critic loss is in the metadata (``loss_cost_qvalue``)."""
+        weights = self._maybe_get_priority_weight(tensordict)
+        target_reward, target_cost = self.compute_targets(tensordict)
+        pred_reward, pred_cost = self._critics(
+            self._critic_input(tensordict),
+            self.qvalue_network_params,
+            self.cost_qvalue_network_params if self.num_costs else None,
+        )
+        td_error = (pred_reward - target_reward).abs()
+        loss_qvalue = distance_loss(
+            pred_reward, target_reward.expand_as(pred_reward), loss_function=self.loss_function
+        ).sum(0)
+        loss_qvalue = self._reduce_loss(loss_qvalue, tensordict=tensordict, weights=weights)
+        if pred_cost is not None:
+            # [*B, m] -> [m, 1, *B] to broadcast against the [m, N, *B] predictions.
+            target = target_cost.movedim(-1, 0).unsqueeze(1).expand_as(pred_cost)
+            loss_cost = distance_loss(pred_cost, target, loss_function=self.loss_function)
+            loss_cost = loss_cost.sum((0, 1))
+            loss_cost = self._reduce_loss(loss_cost, tensordict=tensordict, weights=weights)
+        else:
+            loss_cost = torch.zeros_like(loss_qvalue)
+        metadata = {"td_error": td_error.detach().max(0)[0], "loss_cost_qvalue": loss_cost}
+        return loss_qvalue, metadata
+
+    def critic_loss(self, tensordict: TensorDictBase) -> TensorDictBase:
+        """Critic losses only (``loss_qvalue``, ``loss_cost_qvalue``), for FSRL's update order.
+
+        Also writes the reward TD error at the priority key, as ``SACLoss`` does.
+        """
+        loss_qvalue, metadata = self.qvalue_v2_loss(tensordict)
+        tensordict.set(self.tensor_keys.priority, metadata["td_error"])
+        batch_size = tensordict.batch_size if self.reduction == "none" else []
+        return TensorDict(
+            {"loss_qvalue": loss_qvalue, "loss_cost_qvalue": metadata["loss_cost_qvalue"]},
+            batch_size=batch_size,
+        )
+
+    @property
+    def _cached_detached_cost_qvalue_params(self):
+        # Not cached: the cache of SACLoss is keyed by name and survives in-place updates only
+        # because detach() shares storage, which is also true here; keep it simple and cheap.
+        return self.cost_qvalue_network_params.detach()
+
+    def actor_loss(self, tensordict: TensorDictBase) -> tuple[Tensor, dict[str, Tensor]]:
+        """Lagrangian actor loss; metadata: ``log_prob`` (detached), ``reward_q``, ``cost_q``."""
+        weights = self._maybe_get_priority_weight(tensordict)
+        with (
+            set_exploration_type(ExplorationType.RANDOM),
+            self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
+        ):
+            dist = self.actor_network.get_dist(tensordict)
+            action, log_prob = compute_rsample_log_prob(dist)
+        td_q = self._critic_input(tensordict)
+        td_q.set(self.tensor_keys.action, action)
+        # Detached critic parameters: the actor loss must not move the critics.
+        q_reward, q_cost = self._critics(
+            td_q,
+            self._cached_detached_qvalue_params,
+            self._cached_detached_cost_qvalue_params if self.num_costs else None,
+        )
+        min_q_reward = q_reward.min(0)[0]
+        if log_prob.shape != min_q_reward.shape:
+            raise RuntimeError(
+                f"Actor log-prob and Q-value shapes differ: {log_prob.shape} and "
+                f"{min_q_reward.shape}."
+            )
+        loss_actor = self._alpha * log_prob - min_q_reward
+        metadata = {"log_prob": log_prob.detach(), "reward_q": min_q_reward.detach().mean()}
+        lagrangian = self.lagrangian
+        if q_cost is not None:
+            min_q_cost = q_cost.min(1)[0]  # [m, *B]
+            lag = lagrangian.reshape(-1, *([1] * (min_q_cost.ndim - 1)))
+            loss_actor = loss_actor + (lag * min_q_cost).sum(0)
+            metadata["cost_q"] = min_q_cost.detach().flatten(1).mean(1)
+            if self.rescaling:
+                loss_actor = loss_actor / (1.0 + lagrangian.sum())
+        else:
+            metadata["cost_q"] = min_q_reward.new_zeros(0)
+        loss_actor = self._reduce_loss(loss_actor, tensordict=tensordict, weights=weights)
+        return loss_actor, metadata
+
+    @dispatch
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        loss_qvalue, value_metadata = self.qvalue_v2_loss(tensordict)
+        loss_actor, metadata_actor = self.actor_loss(tensordict)
+        weights = self._maybe_get_priority_weight(tensordict)
+        loss_alpha = self._reduce_loss(
+            self._alpha_loss(log_prob=metadata_actor["log_prob"]),
+            tensordict=tensordict,
+            weights=weights,
+        )
+        tensordict.set(self.tensor_keys.priority, value_metadata["td_error"])
+        out = {
+            "loss_actor": loss_actor,
+            "loss_qvalue": loss_qvalue,
+            "loss_cost_qvalue": value_metadata["loss_cost_qvalue"],
+            "loss_alpha": loss_alpha,
+        }
+        diagnostics = {
+            "alpha": self._alpha,
+            "entropy": -metadata_actor["log_prob"].mean(),
+            "reward_q": metadata_actor["reward_q"],
+            "cost_q": metadata_actor["cost_q"],
+            "lagrangian": self.lagrangian.detach().clone(),
+        }
+        if self.reduction == "none":
+            td_out = TensorDict(out, batch_size=tensordict.batch_size)
+            if self.scalar_output_mode == "non_tensor":
+                for key, value in diagnostics.items():
+                    td_out.set_non_tensor(key, value)
+        else:
+            td_out = TensorDict({**out, **diagnostics}, batch_size=[])
+        self._clear_weakrefs(
+            tensordict,
+            td_out,
+            "actor_network_params",
+            "qvalue_network_params",
+            "cost_qvalue_network_params",
+            "target_actor_network_params",
+            "target_qvalue_network_params",
+            "target_cost_qvalue_network_params",
+        )
+        return td_out
+
+
+class SACLagOptimizers(NamedTuple):
+    """FSRL's three Adam optimisers: actor, critics (reward and cost together), alpha."""
+
+    actor: torch.optim.Optimizer
+    critic: torch.optim.Optimizer
+    alpha: torch.optim.Optimizer | None
+
+
+def make_sac_lag_optimizers(
+    loss: SACLoss,
+    actor_lr: float = 5e-4,
+    critic_lr: float = 1e-3,
+    alpha_lr: float = 3e-4,
+    **adam_kwargs,
+) -> SACLagOptimizers:
+    """Adam optimisers over the loss's parameter groups (defaults: the paper's learning rates).
+
+    Works for ``SACLagLoss`` and torchrl's ``SACLoss``. ``alpha`` is ``None`` with a fixed alpha.
+    """
+    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr), ("alpha_lr", alpha_lr)):
+        if not lr > 0:
+            raise ValueError(f"{name} must be > 0, got {lr!r}.")
+    actor_params = list(loss.actor_network_params.values(True, True))
+    critic_params = list(loss.qvalue_network_params.values(True, True))
+    if getattr(loss, "num_costs", 0):
+        critic_params += list(loss.cost_qvalue_network_params.values(True, True))
+    alpha = None
+    if isinstance(loss.log_alpha, torch.nn.Parameter):
+        alpha = torch.optim.Adam([loss.log_alpha], lr=alpha_lr, **adam_kwargs)
+    return SACLagOptimizers(
+        actor=torch.optim.Adam(actor_params, lr=actor_lr, **adam_kwargs),
+        critic=torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
+        alpha=alpha,
+    )

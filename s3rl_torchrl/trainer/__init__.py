@@ -1,0 +1,54 @@
+"""Training and evaluation of S3RL, SAC-Lag and SAC: configs, builders, the loop, checkpoints.
+
+Use it from Python without Hydra::
+
+    from s3rl_torchrl.trainer import TrainConfig, train
+    cfg = TrainConfig()
+    cfg.task.name = "SafetyHopperVelocity-v1"
+    result = train(cfg, "runs/hopper")
+"""
+
+from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from s3rl_torchrl.trainer.config import (
+    AlgoConfig,
+    CollectorConfig,
+    ConfigError,
+    ContrastiveConfig,
+    EvalConfig,
+    EvalRunConfig,
+    LoggerConfig,
+    NetworkConfig,
+    PIDConfig,
+    TaskConfig,
+    TrainConfig,
+    register_configs,
+    validate,
+)
+from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
+from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, train
+
+__all__ = [
+    "AlgoConfig",
+    "CheckpointError",
+    "CollectorConfig",
+    "ConfigError",
+    "ContrastiveConfig",
+    "Counters",
+    "EvalConfig",
+    "EvalResult",
+    "EvalRunConfig",
+    "LoggerConfig",
+    "NetworkConfig",
+    "PIDConfig",
+    "TaskConfig",
+    "TrainConfig",
+    "TrainResult",
+    "Trainer",
+    "evaluate",
+    "format_table",
+    "load_checkpoint",
+    "register_configs",
+    "save_checkpoint",
+    "train",
+    "validate",
+]

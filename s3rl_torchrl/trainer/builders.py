@@ -1,0 +1,173 @@
+"""Build a run's components from its config: envs, networks, losses, controller, buffer.
+
+Each builder returns a plain TorchRL object, so a user can take one piece into their own loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+from torchrl.envs import EnvBase
+from torchrl.modules import ProbabilisticActor
+from torchrl.objectives import SoftUpdate
+
+from s3rl_torchrl.data import SafeUnsafeSampler
+from s3rl_torchrl.envs import make_env
+from s3rl_torchrl.modules import (
+    ContrastivePhase,
+    build_cost_qvalue_network,
+    build_qvalue_network,
+    build_s3rl_actor,
+    get_policy_encoder,
+)
+from s3rl_torchrl.objectives import (
+    LagrangianController,
+    LearnedLagrangian,
+    PIDLagrangian,
+    SACLagLoss,
+    SACLagOptimizers,
+    SafetyInfoNCELoss,
+    make_sac_lag_optimizers,
+)
+from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
+
+ACTIVATIONS: dict[str, type[nn.Module]] = {
+    "relu": nn.ReLU,
+    "tanh": nn.Tanh,
+    "elu": nn.ELU,
+    "silu": nn.SiLU,
+}
+
+
+def build_envs(cfg: TrainConfig) -> tuple[EnvBase, EnvBase]:
+    """Training envs and separate test envs (seeded apart so they never share episodes)."""
+    train_env = make_env(
+        cfg.task.name,
+        num_envs=cfg.collector.num_envs,
+        seed=cfg.seed,
+        device=cfg.device,
+        batching=cfg.collector.batching,
+    )
+    test_env = make_env(
+        cfg.task.name,
+        num_envs=cfg.eval.num_envs,
+        seed=cfg.seed + 100_000,
+        device=cfg.device,
+        batching=cfg.collector.batching,
+    )
+    return train_env, test_env
+
+
+@dataclass
+class Agent:
+    """The learnable parts of a run and what updates them."""
+
+    actor: ProbabilisticActor
+    loss: SACLagLoss
+    target_updater: SoftUpdate
+    optimizers: SACLagOptimizers
+    lagrangian: LagrangianController | None
+    contrastive: ContrastivePhase | None
+
+
+def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianController | None:
+    if algo.lagrangian == "pid":
+        pid = algo.pid
+        return PIDLagrangian(
+            pid.kp,
+            pid.ki,
+            pid.kd,
+            cost_limit=cost_limit,
+            error_ema=pid.ema_alpha,
+            cost_ema=pid.ema_alpha,
+            derivative_delay=pid.derivative_delay,
+            ki_inside_integral=pid.ki_inside_integral,
+            penalty_max=pid.penalty_max,
+            lagrangian_init=algo.lagrangian_init,
+        )
+    if algo.lagrangian == "learned":
+        return LearnedLagrangian(
+            cost_limit, lr=algo.lagrangian_lr, lagrangian_init=algo.lagrangian_init
+        )
+    return None
+
+
+def build_agent(
+    cfg: TrainConfig, env: EnvBase, replay_buffer: TensorDictReplayBuffer | None
+) -> Agent:
+    """Actor, critics, ``SACLagLoss``, optimisers, Lagrangian and contrastive phase."""
+    algo, net = cfg.algo, cfg.network
+    observation_dim = env.observation_spec["observation"].shape[-1]
+    action_spec = env.action_spec_unbatched
+    action_dim = action_spec.shape[-1]
+    activation = ACTIVATIONS[net.activation]
+
+    actor = build_s3rl_actor(
+        observation_dim,
+        action_spec,
+        hidden=tuple(net.actor_hidden),
+        log_std_bounds=(net.log_std_min, net.log_std_max),
+        activation=activation,
+    )
+    qvalue = build_qvalue_network(
+        observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
+    )
+    constrained = algo.lagrangian != "none"
+    # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only cost
+    # time, so the loss is built without them (it is then exactly SACLoss).
+    cost_qvalue = (
+        build_cost_qvalue_network(
+            observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
+        )
+        if constrained
+        else None
+    )
+    loss = SACLagLoss(
+        actor,
+        qvalue,
+        cost_qvalue,
+        alpha_init=algo.alpha_init,
+        fixed_alpha=not algo.auto_alpha,
+        action_spec=action_spec,
+        entropy_in_cost_target=algo.cost_entropy,
+        rescaling=algo.rescaling,
+        lagrangian_init=algo.lagrangian_init if constrained else 0.0,
+    )
+    loss.make_value_estimator(gamma=algo.gamma)
+    target_updater = SoftUpdate(loss, tau=algo.tau)
+    optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
+    lagrangian = build_lagrangian(algo, cfg.task.cost_limit) if constrained else None
+
+    contrastive = None
+    if algo.contrastive:
+        if replay_buffer is None:
+            raise ValueError("the contrastive phase needs the replay buffer it samples from")
+        c = algo.contrastive_cfg
+        infonce = SafetyInfoNCELoss(
+            get_policy_encoder(actor),
+            temperature=c.temperature,
+            momentum_encoder=c.momentum_tau is not None,
+        )
+        view = SafeUnsafeSampler.contrastive_view(replay_buffer, c.batch_size)
+        updater = SoftUpdate(infonce, tau=c.momentum_tau) if c.momentum_tau is not None else None
+        contrastive = ContrastivePhase(
+            infonce, view, c.lr, num_steps=c.steps, target_updater=updater
+        )
+    return Agent(actor, loss, target_updater, optimizers, lagrangian, contrastive)
+
+
+def build_replay_buffer(algo: AlgoConfig) -> TensorDictReplayBuffer:
+    """One storage for everything; the sampler keeps the safe/unsafe partition as it writes."""
+    return TensorDictReplayBuffer(
+        storage=LazyTensorStorage(algo.buffer_size),
+        sampler=SafeUnsafeSampler(),
+        batch_size=algo.batch_size,
+    )
+
+
+def set_torch_threads(threads: int) -> None:
+    if threads > 0:
+        torch.set_num_threads(threads)

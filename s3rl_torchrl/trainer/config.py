@@ -1,0 +1,296 @@
+"""Typed configuration of a training run: one dataclass per component, stored in Hydra's
+ConfigStore so that every YAML under ``configs/`` is type-checked against it.
+
+Types are checked by OmegaConf when Hydra merges the YAMLs and overrides; values (ranges and
+choices) are checked by :func:`validate`, which every entry point calls before it builds
+anything, so a bad override fails with the field's name and what it accepts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING, DictConfig, OmegaConf
+
+from s3rl_torchrl.envs import BATCHING_CHOICES, task_names
+
+ALGO_NAMES = ("s3rl", "sac_lag", "sac", "s3rl_nolag")
+LAGRANGIAN_CHOICES = ("pid", "learned", "none")
+ACTIVATIONS = ("relu", "tanh", "elu", "silu")
+LOGGER_BACKENDS = ("csv", "tensorboard", "wandb", "mlflow", "none")
+DEVICES = ("cpu", "cuda", "mps")
+
+
+class ConfigError(ValueError):
+    """A configuration value is out of range or not one of its choices."""
+
+
+def _fail(path: str, value: Any, allowed: str) -> None:
+    raise ConfigError(f"Invalid value {value!r} for '{path}': {allowed}.")
+
+
+def _check_choice(path: str, value: Any, choices: tuple) -> None:
+    if value not in choices:
+        _fail(path, value, "allowed values are " + ", ".join(map(str, choices)))
+
+
+def _check_range(
+    path: str,
+    value: float,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_inclusive: bool = True,
+) -> None:
+    below = low is not None and (value < low if low_inclusive else value <= low)
+    above = high is not None and value > high
+    if below or above:
+        lo = "(-inf" if low is None else ("[" if low_inclusive else "(") + f"{low}"
+        hi = "inf)" if high is None else f"{high}]"
+        _fail(path, value, f"must be in {lo}, {hi}")
+
+
+@dataclass
+class TaskConfig:
+    """Which velocity task, and its per-episode cost limit d (paper: 10)."""
+
+    name: str = MISSING
+    cost_limit: float = 10.0
+
+    def check(self, path: str) -> None:
+        _check_choice(f"{path}.name", self.name, tuple(task_names()))
+        _check_range(f"{path}.cost_limit", self.cost_limit, 0.0)
+
+
+@dataclass
+class PIDConfig:
+    """PID Lagrangian gains and the OmniSafe/rlpyt options (off by default: FSRL's form)."""
+
+    kp: float = 0.05
+    ki: float = 0.0005
+    kd: float = 0.1
+    ema_alpha: float = 0.0  # 0 disables the EMA of error and cost (FSRL)
+    derivative_delay: int = 1
+    ki_inside_integral: bool = False
+    penalty_max: float | None = None
+
+    def check(self, path: str) -> None:
+        for name in ("kp", "ki", "kd"):
+            _check_range(f"{path}.{name}", getattr(self, name), 0.0)
+        _check_range(f"{path}.ema_alpha", self.ema_alpha, 0.0, 1.0)
+        _check_range(f"{path}.derivative_delay", self.derivative_delay, 1)
+        if self.penalty_max is not None:
+            _check_range(f"{path}.penalty_max", self.penalty_max, 0.0, low_inclusive=False)
+
+
+@dataclass
+class ContrastiveConfig:
+    """The S3RL representation phase (paper §3.4, Table 3)."""
+
+    temperature: float = 0.7
+    batch_size: int = 64  # B: B anchors, B positives, B negatives per InfoNCE step
+    update_interval: int = 1000  # T: gradient steps between phases (enc_update_steps)
+    steps: int = 50  # E: InfoNCE steps per phase (enc_training_epoch)
+    lr: float = 5e-4
+    momentum_tau: float | None = None  # MoCo-style target encoder when set
+
+    def check(self, path: str) -> None:
+        _check_range(f"{path}.temperature", self.temperature, 0.0, low_inclusive=False)
+        _check_range(f"{path}.batch_size", self.batch_size, 1)
+        _check_range(f"{path}.update_interval", self.update_interval, 1)
+        _check_range(f"{path}.steps", self.steps, 1)
+        _check_range(f"{path}.lr", self.lr, 0.0, low_inclusive=False)
+        if self.momentum_tau is not None:
+            _check_range(f"{path}.momentum_tau", self.momentum_tau, 0.0, 1.0, low_inclusive=False)
+
+
+@dataclass
+class AlgoConfig:
+    """SAC with an optional Lagrangian and an optional contrastive phase (defaults: paper)."""
+
+    name: str = "s3rl"
+    lagrangian: str = "pid"
+    contrastive: bool = True
+    pid: PIDConfig = field(default_factory=PIDConfig)
+    lagrangian_lr: float = 5e-3  # learned Lagrangian only
+    lagrangian_init: float = 0.0
+    rescaling: bool = True
+    cost_entropy: bool = True  # subtract alpha*log_pi in the cost targets (FSRL, paper)
+    gamma: float = 0.99
+    tau: float = 0.05
+    n_step: int = 2
+    actor_lr: float = 5e-4
+    critic_lr: float = 1e-3
+    alpha_lr: float = 3e-4
+    alpha_init: float = 0.005
+    auto_alpha: bool = True
+    batch_size: int = 256
+    update_per_step: float = 0.2
+    buffer_size: int = 100_000
+    contrastive_cfg: ContrastiveConfig = field(default_factory=ContrastiveConfig)
+
+    def check(self, path: str) -> None:
+        _check_choice(f"{path}.name", self.name, ALGO_NAMES)
+        _check_choice(f"{path}.lagrangian", self.lagrangian, LAGRANGIAN_CHOICES)
+        self.pid.check(f"{path}.pid")
+        self.contrastive_cfg.check(f"{path}.contrastive_cfg")
+        _check_range(f"{path}.lagrangian_lr", self.lagrangian_lr, 0.0, low_inclusive=False)
+        _check_range(f"{path}.lagrangian_init", self.lagrangian_init, 0.0)
+        _check_range(f"{path}.gamma", self.gamma, 0.0, 1.0)
+        _check_range(f"{path}.tau", self.tau, 0.0, 1.0, low_inclusive=False)
+        _check_range(f"{path}.n_step", self.n_step, 1)
+        for name in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init"):
+            _check_range(f"{path}.{name}", getattr(self, name), 0.0, low_inclusive=False)
+        _check_range(f"{path}.batch_size", self.batch_size, 1)
+        _check_range(f"{path}.update_per_step", self.update_per_step, 0.0, low_inclusive=False)
+        _check_range(f"{path}.buffer_size", self.buffer_size, self.batch_size)
+
+
+@dataclass
+class NetworkConfig:
+    """Actor trunk (the policy encoder) and critic MLPs; they share no parameters."""
+
+    actor_hidden: list[int] = field(default_factory=lambda: [128, 128])
+    critic_hidden: list[int] = field(default_factory=lambda: [128, 128])
+    activation: str = "relu"
+    log_std_min: float = -20.0
+    log_std_max: float = 2.0
+
+    def check(self, path: str) -> None:
+        for name in ("actor_hidden", "critic_hidden"):
+            sizes = getattr(self, name)
+            if len(sizes) == 0 or any(int(s) < 1 for s in sizes):
+                _fail(f"{path}.{name}", list(sizes), "must be a non-empty list of sizes >= 1")
+        _check_choice(f"{path}.activation", self.activation, ACTIVATIONS)
+        if not self.log_std_min < self.log_std_max:
+            _fail(f"{path}.log_std_min", self.log_std_min, "must be below log_std_max")
+
+
+@dataclass
+class CollectorConfig:
+    """How frames are gathered: torchrl ``Collector`` over ``make_env``."""
+
+    num_envs: int = 10
+    batching: str = "sync_vector"
+    frames_per_batch: int = 10_000
+    total_frames: int = 1_000_000
+    init_random_frames: int = 10_000
+    frames_per_epoch: int = 10_000  # evaluation and checkpoint cadence
+
+    def check(self, path: str) -> None:
+        _check_range(f"{path}.num_envs", self.num_envs, 1)
+        _check_choice(f"{path}.batching", self.batching, BATCHING_CHOICES)
+        _check_range(f"{path}.frames_per_batch", self.frames_per_batch, self.num_envs)
+        _check_range(f"{path}.total_frames", self.total_frames, 1)
+        _check_range(f"{path}.init_random_frames", self.init_random_frames, 0)
+        _check_range(f"{path}.frames_per_epoch", self.frames_per_epoch, 1)
+
+
+@dataclass
+class EvalConfig:
+    """Deterministic evaluation on separate test envs."""
+
+    num_envs: int = 2
+    episodes: int = 2  # per epoch
+    final_episodes: int = 10
+    max_steps: int = 1000
+
+    def check(self, path: str) -> None:
+        _check_range(f"{path}.num_envs", self.num_envs, 1)
+        _check_range(f"{path}.episodes", self.episodes, 1)
+        _check_range(f"{path}.final_episodes", self.final_episodes, 1)
+        _check_range(f"{path}.max_steps", self.max_steps, 1)
+
+
+@dataclass
+class LoggerConfig:
+    """torchrl logger backend; CSV needs no server, W&B runs offline by default."""
+
+    backend: str = "csv"
+    project: str = "s3rl-torchrl"
+    wandb_mode: str = "offline"
+    progress_bar: bool = True
+
+    def check(self, path: str) -> None:
+        _check_choice(f"{path}.backend", self.backend, LOGGER_BACKENDS)
+        _check_choice(f"{path}.wandb_mode", self.wandb_mode, ("offline", "online", "disabled"))
+
+
+@dataclass
+class TrainConfig:
+    """A whole training run (``s3rl-train``)."""
+
+    task: TaskConfig = field(default_factory=TaskConfig)
+    algo: AlgoConfig = field(default_factory=AlgoConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    collector: CollectorConfig = field(default_factory=CollectorConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    logger: LoggerConfig = field(default_factory=LoggerConfig)
+    seed: int = 10
+    device: str = "cpu"
+    threads: int = 0  # torch intra-op threads; 0 keeps torch's default
+    compile: bool = False
+    save_interval: int = 4  # epochs between checkpoints (and one at the end)
+    resume: str | None = None  # a run directory to continue
+
+    def check(self, path: str = "") -> None:
+        prefix = f"{path}." if path else ""
+        for name in ("task", "algo", "network", "collector", "eval", "logger"):
+            getattr(self, name).check(prefix + name)
+        _check_choice(prefix + "device", self.device, DEVICES)
+        _check_range(prefix + "threads", self.threads, 0)
+        _check_range(prefix + "save_interval", self.save_interval, 1)
+        if self.collector.frames_per_epoch % self.collector.frames_per_batch:
+            _fail(
+                prefix + "collector.frames_per_epoch",
+                self.collector.frames_per_epoch,
+                f"must be a multiple of collector.frames_per_batch "
+                f"({self.collector.frames_per_batch})",
+            )
+
+
+@dataclass
+class EvalRunConfig:
+    """``s3rl-eval``: evaluate a checkpoint."""
+
+    checkpoint: str = MISSING
+    episodes: int = 10
+    num_envs: int = 2
+    seed: int = 0
+    video: bool = False
+    video_path: str | None = None
+
+    def check(self, path: str = "") -> None:
+        _check_range("episodes", self.episodes, 1)
+        _check_range("num_envs", self.num_envs, 1)
+
+
+def register_configs() -> None:
+    """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore."""
+    cs = ConfigStore.instance()
+    cs.store(name="train_schema", node=TrainConfig)
+    cs.store(name="eval_schema", node=EvalRunConfig)
+    for name in task_names():
+        cs.store(group="task", name=name, node=TaskConfig(name=name))
+
+
+def validate(cfg: DictConfig | TrainConfig, schema: type = TrainConfig) -> Any:
+    """Turn a Hydra config into its dataclass and check every value; raise ``ConfigError``."""
+    if isinstance(cfg, DictConfig):
+        merged = OmegaConf.merge(OmegaConf.structured(schema), cfg)
+        obj = OmegaConf.to_object(merged)
+    else:
+        obj = cfg
+    obj.check()
+    return obj
+
+
+def to_container(obj: Any) -> dict:
+    """A dataclass config as plain dicts (for JSON and checkpoints)."""
+    if is_dataclass(obj):
+        return {f.name: to_container(getattr(obj, f.name)) for f in fields(obj)}
+    if isinstance(obj, list | tuple):
+        return [to_container(v) for v in obj]
+    return obj

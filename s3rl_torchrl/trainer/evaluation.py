@@ -1,0 +1,124 @@
+"""Deterministic evaluation: episode reward, cost and length statistics, safe-state occupancy."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+
+@dataclass
+class EvalResult:
+    """Statistics over evaluation episodes (the keys of ``final_eval.json``).
+
+    ``safe_occupancy`` is the percentage of evaluated steps whose cost is zero.
+    Standard deviations are population std (``ddof=0``), as FSRL reports.
+    """
+
+    reward_mean: float
+    reward_std: float
+    cost_mean: float
+    cost_std: float
+    length_mean: float
+    safe_occupancy: float
+    episodes: int
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+
+def _mean_std(values: list[float]) -> tuple[float, float]:
+    mean = sum(values) / len(values)
+    return mean, math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
+
+
+def episode_statistics(rollout: TensorDictBase) -> list[tuple[float, float, int, int]]:
+    """Per finished episode of a ``[num_envs, T]`` rollout: (reward, cost, length, safe steps).
+
+    An episode ends at ``("next", "done")`` or, if still running, at the rollout's last step
+    (so evaluation with a short ``max_steps`` cuts episodes there).
+    """
+    reward = rollout["next", "reward"].sum(-1)
+    cost = rollout["next", "cost"].sum(-1)
+    done = rollout["next", "done"].squeeze(-1).clone()
+    done[..., -1] = True
+    episodes = []
+    for env_reward, env_cost, env_done in zip(
+        reward.reshape(-1, reward.shape[-1]).tolist(),
+        cost.reshape(-1, cost.shape[-1]).tolist(),
+        done.reshape(-1, done.shape[-1]).tolist(),
+    ):
+        ep_reward = ep_cost = 0.0
+        length = safe = 0
+        for r, c, d in zip(env_reward, env_cost, env_done):
+            ep_reward += r
+            ep_cost += c
+            length += 1
+            safe += c == 0
+            if d:
+                episodes.append((ep_reward, ep_cost, length, safe))
+                ep_reward = ep_cost = 0.0
+                length = safe = 0
+    return episodes
+
+
+def evaluate(
+    env: EnvBase,
+    policy: Callable[[TensorDictBase], TensorDictBase],
+    episodes: int,
+    max_steps: int = 1000,
+) -> EvalResult:
+    """Run ``policy`` deterministically on ``env`` until ``episodes`` episodes have ended.
+
+    Rollouts of ``max_steps`` steps start from a reset; each copy of a batched env contributes
+    every episode it finishes, in order, and the first ``episodes`` are kept.
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}.")
+    collected: list[tuple[float, float, int, int]] = []
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        while len(collected) < episodes:
+            rollout = env.rollout(max_steps, policy, break_when_any_done=False)
+            if rollout.ndim == 1:
+                rollout = rollout.unsqueeze(0)
+            collected.extend(episode_statistics(rollout))
+    collected = collected[:episodes]
+    rewards, costs, lengths, safe = (list(x) for x in zip(*collected))
+    reward_mean, reward_std = _mean_std(rewards)
+    cost_mean, cost_std = _mean_std(costs)
+    return EvalResult(
+        reward_mean=reward_mean,
+        reward_std=reward_std,
+        cost_mean=cost_mean,
+        cost_std=cost_std,
+        length_mean=sum(lengths) / len(lengths),
+        safe_occupancy=100.0 * sum(safe) / sum(lengths),
+        episodes=len(collected),
+    )
+
+
+def format_table(rows: dict[str, EvalResult], title: str = "Final evaluation") -> str:
+    """A Markdown table of evaluation results, one row per label."""
+    lines = [
+        f"{title}",
+        "",
+        "| run | episodes | reward | cost | length | safe steps (%) |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for label, r in rows.items():
+        lines.append(
+            f"| {label} | {r.episodes} | {r.reward_mean:.2f} ± {r.reward_std:.2f} | "
+            f"{r.cost_mean:.2f} ± {r.cost_std:.2f} | {r.length_mean:.1f} | "
+            f"{r.safe_occupancy:.1f} |"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,405 @@
+"""The training loop of S3RL, SAC-Lag and SAC: collect, store, update lambda, update, evaluate.
+
+Read top to bottom: :func:`train` builds everything from a :class:`TrainConfig`, then runs one
+iteration per collected batch:
+
+1. store the batch (n-step transitions, one storage) in the replay buffer;
+2. update lambda once from the mean cost of the training episodes that ended in the batch
+   (none ended: no update), as FSRL does before that collect's gradient steps;
+3. run ``update_per_step`` gradient steps per collected frame (critics, actor, alpha, then the
+   target critics), and every ``T`` gradient steps the contrastive phase on the policy encoder;
+4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
+
+Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
+run can go on with ``resume=<run dir>``: pending gradient steps and the epoch's end are done
+first, so the resumed run ends with the same counters as an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from torchrl.collectors import Collector
+from tqdm.auto import tqdm
+
+from s3rl_torchrl.objectives import make_nstep_transform
+from s3rl_torchrl.trainer.builders import (
+    Agent,
+    build_agent,
+    build_envs,
+    build_replay_buffer,
+    set_torch_threads,
+)
+from s3rl_torchrl.trainer.checkpoint import (
+    REPLAY_DIR,
+    capture_rng_state,
+    check_compatible,
+    load_checkpoint,
+    restore_rng_state,
+    save_checkpoint,
+)
+from s3rl_torchrl.trainer.config import TrainConfig, to_container
+from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
+from s3rl_torchrl.trainer.metrics import RunMetrics, make_torchrl_logger
+
+FINAL_EVAL_FILE = "final_eval.json"
+LOSS_DIAGNOSTICS = (
+    "loss_actor", "loss_qvalue", "loss_cost_qvalue", "loss_alpha", "alpha", "entropy",
+    "reward_q", "cost_q",
+)
+CONTRASTIVE_DIAGNOSTICS = (
+    "loss_infonce", "pos_similarity", "neg_similarity", "accuracy", "mi_lower_bound",
+)
+CONFIG_FILE = "config.json"
+# Config fields the saved weights and buffer depend on: a resume must not change them.
+RESUME_LOCKED = [
+    "task.name",
+    "algo.name",
+    "algo.lagrangian",
+    "algo.contrastive",
+    "algo.buffer_size",
+    "algo.n_step",
+    "network.actor_hidden",
+    "network.critic_hidden",
+    "network.activation",
+    "collector.num_envs",
+    "collector.frames_per_batch",
+    "collector.frames_per_epoch",
+    "collector.total_frames",
+]
+
+
+@dataclass
+class Counters:
+    """Progress of a run; checkpointed, and equal after a resume to an uninterrupted run's."""
+
+    frames: int = 0
+    grad_steps: int = 0
+    epochs: int = 0  # completed epochs (evaluated, logged)
+    episodes: int = 0  # finished training episodes
+    lagrangian_updates: int = 0
+    contrastive_phases: int = 0
+    contrastive_skipped: int = 0
+    pending_updates: float = 0.0  # gradient steps owed to the frames collected so far
+
+
+@dataclass
+class TrainResult:
+    run_dir: Path
+    status: str  # "finished" or "interrupted"
+    counters: Counters
+    final_eval: EvalResult | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+class StopRequest:
+    """Set by SIGINT/SIGTERM (or a callback): the loop stops at the next safe point."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: dict[int, Any] = {}
+
+    def __call__(self, signum=None, frame=None) -> None:
+        self.requested = True
+
+    def install(self) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._previous[sig] = signal.signal(sig, self)
+            except ValueError:  # not the main thread (e.g. some launchers): no handler
+                pass
+
+    def uninstall(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+
+def seed_everything(seed: int) -> None:
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)
+    random.seed(seed)
+
+
+class Trainer:
+    """Holds a run's components; :meth:`run` is the loop. Build it with :func:`train`."""
+
+    def __init__(
+        self,
+        cfg: TrainConfig,
+        run_dir: str | Path,
+        on_epoch_end: Callable[[Trainer, dict[str, Any]], None] | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.on_epoch_end = on_epoch_end
+        self.stop = StopRequest()
+        checkpoint = None
+        if cfg.resume:
+            checkpoint, checkpoint_dir = load_checkpoint(cfg.resume)
+            check_compatible(checkpoint["config"], to_container(cfg), RESUME_LOCKED)
+            run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
+        self.run_dir = Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+
+        set_torch_threads(cfg.threads)
+        seed_everything(cfg.seed)
+        self.train_env, self.test_env = build_envs(cfg)
+        self.replay_buffer = build_replay_buffer(cfg.algo)
+        self.agent: Agent = build_agent(cfg, self.train_env, self.replay_buffer)
+        # n-step windows need consecutive batches of the same env copies: the transform keeps
+        # the last n frames of each copy until the next batch (paper: n = 2).
+        self.nstep = (
+            make_nstep_transform(cfg.algo.n_step, cfg.algo.gamma) if cfg.algo.n_step > 1 else None
+        )
+        self.counters = Counters()
+        if checkpoint is not None:
+            self._restore(checkpoint, checkpoint_dir)
+        else:
+            (self.run_dir / CONFIG_FILE).write_text(json.dumps(to_container(cfg), indent=2))
+        logger = make_torchrl_logger(
+            cfg.logger.backend,
+            self.run_dir,
+            exp_name=f"{cfg.algo.name}_{cfg.task.name}_seed{cfg.seed}",
+            project=cfg.logger.project,
+            wandb_mode=cfg.logger.wandb_mode,
+        )
+        self.metrics = RunMetrics(
+            self.run_dir, logger, resume_frames=self.counters.frames if checkpoint else None
+        )
+        self.history: list[dict[str, Any]] = []
+        self._train_episodes: list[tuple[float, float]] = []  # (reward, cost) this epoch
+        self._last_losses: dict[str, float] = {}
+        self._last_contrastive: dict[str, float] = {}
+
+    # ----------------------------------------------------------------------------- the loop
+    def run(self) -> TrainResult:
+        cfg, c = self.cfg, self.counters
+        self.stop.install()
+        progress = tqdm(
+            total=cfg.collector.total_frames,
+            initial=c.frames,
+            unit="frame",
+            disable=not cfg.logger.progress_bar,
+            dynamic_ncols=True,
+        )
+        try:
+            # A resumed run first pays what the interrupted one owed for its last batch.
+            if not self._finish_batch():
+                return self._interrupted(progress)
+            collector = self._make_collector()
+            for batch in collector:
+                c.frames += batch.numel()
+                self._store(batch)
+                self._update_lagrangian(batch)
+                c.pending_updates += self._updates_owed(batch.numel())
+                progress.update(batch.numel())
+                if not self._finish_batch():
+                    collector.shutdown()
+                    return self._interrupted(progress)
+                progress.set_postfix(self._progress_postfix(), refresh=False)
+            collector.shutdown()
+            final = self._final_evaluation()
+            return TrainResult(self.run_dir, "finished", c, final, self.history)
+        finally:
+            progress.close()
+            self.stop.uninstall()
+
+    def _finish_batch(self) -> bool:
+        """Gradient steps owed, then the epoch's end if the batch closed one. False: stopped."""
+        while self.counters.pending_updates >= 1.0:
+            if self.stop.requested:
+                return False
+            self._gradient_step()
+        epochs_done = self.counters.frames // self.cfg.collector.frames_per_epoch
+        if epochs_done > self.counters.epochs:
+            self._end_epoch()
+        return not self.stop.requested or self.counters.frames >= self.cfg.collector.total_frames
+
+    # ----------------------------------------------------------------------------- steps
+    def _make_collector(self) -> Collector:
+        cfg, c = self.cfg, self.counters
+        remaining = cfg.collector.total_frames - c.frames
+        return Collector(
+            self.train_env,
+            self.agent.actor,
+            frames_per_batch=cfg.collector.frames_per_batch,
+            total_frames=remaining,
+            init_random_frames=max(0, cfg.collector.init_random_frames - c.frames),
+            device=cfg.device,
+        )
+
+    def _store(self, batch: TensorDictBase) -> None:
+        data = self.nstep.inv(batch) if self.nstep is not None else batch
+        if data is not None and data.numel():
+            self.replay_buffer.extend(data.reshape(-1))
+
+    def _update_lagrangian(self, batch: TensorDictBase) -> None:
+        done = batch["next", "done"].squeeze(-1)
+        if not done.any():
+            return
+        costs = batch["next", "episode_cost"][done].sum(-1)
+        rewards = batch["next", "episode_reward"][done].sum(-1)
+        self._train_episodes.extend(zip(rewards.tolist(), costs.tolist()))
+        self.counters.episodes += int(done.sum())
+        if self.agent.lagrangian is not None:
+            self.agent.loss.lagrangian = self.agent.lagrangian.update(costs.mean())
+            self.counters.lagrangian_updates += 1
+
+    def _updates_owed(self, frames: int) -> float:
+        # No learning from the uniform-random warm-up frames alone (FSRL starts after them).
+        if self.counters.frames < self.cfg.collector.init_random_frames:
+            return 0.0
+        if len(self.replay_buffer) < self.cfg.algo.batch_size:
+            return 0.0
+        return self.cfg.algo.update_per_step * frames
+
+    def _gradient_step(self) -> None:
+        agent = self.agent
+        batch = self.replay_buffer.sample()
+        losses = agent.loss(batch)
+        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
+        optimizers = [o for o in agent.optimizers if o is not None]
+        for optimizer in optimizers:
+            optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        for optimizer in optimizers:
+            optimizer.step()
+        agent.target_updater.step()
+        self.counters.grad_steps += 1
+        self.counters.pending_updates -= 1.0
+        self._last_losses = {k: v.detach() for k, v in losses.items()}
+
+        phase = agent.contrastive
+        interval = self.cfg.algo.contrastive_cfg.update_interval
+        if phase is not None and self.counters.grad_steps % interval == 0:
+            stats = phase.run()
+            if stats is None:
+                self.counters.contrastive_skipped += 1
+            else:
+                self.counters.contrastive_phases += 1
+                self._last_contrastive = stats
+
+    def _end_epoch(self) -> None:
+        cfg, c = self.cfg, self.counters
+        c.epochs += 1
+        start = time.perf_counter()
+        result = evaluate(self.test_env, self.agent.actor, cfg.eval.episodes, cfg.eval.max_steps)
+        row = self._epoch_row(result, time.perf_counter() - start)
+        self.metrics.log_epoch(row)
+        self.history.append(row)
+        self._train_episodes.clear()
+        last = c.frames >= cfg.collector.total_frames
+        if c.epochs % cfg.save_interval == 0 or last:
+            self.save()
+        if self.on_epoch_end is not None:
+            self.on_epoch_end(self, row)
+
+    def _epoch_row(self, result: EvalResult, eval_seconds: float) -> dict[str, Any]:
+        c = self.counters
+        episodes = self._train_episodes
+        nan = float("nan")
+        lagrangian = self.agent.loss.lagrangian
+        row: dict[str, Any] = {
+            "frames": c.frames,
+            "epoch": c.epochs,
+            "grad_steps": c.grad_steps,
+            "train/episodes": len(episodes),
+            "train/reward": float(np.mean([r for r, _ in episodes])) if episodes else nan,
+            "train/cost": float(np.mean([k for _, k in episodes])) if episodes else nan,
+            "lagrangian": float(lagrangian.sum()) if lagrangian.numel() else 0.0,
+            "eval/reward": result.reward_mean,
+            "eval/reward_std": result.reward_std,
+            "eval/cost": result.cost_mean,
+            "eval/cost_std": result.cost_std,
+            "eval/length": result.length_mean,
+            "eval/safe_occupancy": result.safe_occupancy,
+            "eval/seconds": eval_seconds,
+        }
+        for key in LOSS_DIAGNOSTICS:
+            value = self._last_losses.get(key)
+            row[f"train/{key}"] = float(value.float().mean()) if value is not None else nan
+        for key in CONTRASTIVE_DIAGNOSTICS:
+            row[f"contrastive/{key}"] = float(self._last_contrastive.get(key, nan))
+        return row
+
+    def _progress_postfix(self) -> dict[str, str]:
+        last = self.history[-1] if self.history else {}
+        lagrangian = self.agent.loss.lagrangian
+        return {
+            "reward": f"{last.get('eval/reward', float('nan')):.1f}",
+            "cost": f"{last.get('eval/cost', float('nan')):.1f}",
+            "lambda": f"{float(lagrangian.sum()) if lagrangian.numel() else 0.0:.3f}",
+        }
+
+    def _final_evaluation(self) -> EvalResult:
+        cfg = self.cfg
+        result = evaluate(
+            self.test_env, self.agent.actor, cfg.eval.final_episodes, cfg.eval.max_steps
+        )
+        result.save(self.run_dir / FINAL_EVAL_FILE)
+        label = f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}"
+        print("\n" + format_table({label: result}) + f"\n\nRun directory: {self.run_dir}\n")
+        return result
+
+    def _interrupted(self, progress) -> TrainResult:
+        self.save()
+        progress.write(
+            f"Interrupted: checkpoint written to {self.run_dir / 'checkpoints' / 'latest'}; "
+            f"continue with resume={self.run_dir}"
+        )
+        return TrainResult(self.run_dir, "interrupted", self.counters, None, self.history)
+
+    # ----------------------------------------------------------------------------- state
+    def state_dict(self) -> dict[str, Any]:
+        agent = self.agent
+        return {
+            "config": to_container(self.cfg),
+            "counters": dict(vars(self.counters)),
+            "loss": agent.loss.state_dict(),
+            "optimizers": {
+                name: opt.state_dict()
+                for name, opt in agent.optimizers._asdict().items()
+                if opt is not None
+            },
+            "lagrangian": agent.lagrangian.state_dict() if agent.lagrangian is not None else None,
+            "contrastive": agent.contrastive.state_dict() if agent.contrastive is not None else None,
+            "rng": capture_rng_state(),
+        }
+
+    def save(self) -> Path:
+        return save_checkpoint(
+            self.run_dir / "checkpoints" / "latest", self.state_dict(), self.replay_buffer
+        )
+
+    def _restore(self, state: dict[str, Any], checkpoint_dir: Path) -> None:
+        agent = self.agent
+        agent.loss.load_state_dict(state["loss"])
+        for name, opt in agent.optimizers._asdict().items():
+            if opt is not None:
+                opt.load_state_dict(state["optimizers"][name])
+        if agent.lagrangian is not None:
+            agent.lagrangian.load_state_dict(state["lagrangian"])
+        if agent.contrastive is not None:
+            agent.contrastive.load_state_dict(state["contrastive"])
+        self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
+        self.counters = Counters(**state["counters"])
+        restore_rng_state(state["rng"])
+
+
+def train(
+    cfg: TrainConfig,
+    run_dir: str | Path,
+    on_epoch_end: Callable[[Trainer, dict[str, Any]], None] | None = None,
+) -> TrainResult:
+    """Train from a validated config into ``run_dir`` (or the run being resumed)."""
+    return Trainer(cfg, run_dir, on_epoch_end).run()

@@ -1,0 +1,113 @@
+"""Run metrics: torchrl's loggers plus one ``metrics.csv`` table per run (one row per epoch).
+
+On resume both continue from the checkpoint's frame count: rows logged after that checkpoint
+(by the interrupted run) are dropped first, so the files have neither gaps nor duplicates.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+from torchrl.record.loggers import Logger
+
+METRICS_FILE = "metrics.csv"
+STEP_COLUMN = "frames"
+
+
+def make_torchrl_logger(
+    backend: str, run_dir: Path, exp_name: str, project: str, wandb_mode: str
+) -> Logger | None:
+    """One of torchrl's loggers, writing inside the run directory (no server needed)."""
+    log_dir = run_dir / "logs"
+    if backend == "none":
+        return None
+    if backend == "csv":
+        from torchrl.record.loggers.csv import CSVLogger
+
+        return CSVLogger(exp_name=exp_name, log_dir=str(log_dir))
+    if backend == "tensorboard":
+        from torchrl.record.loggers.tensorboard import TensorboardLogger
+
+        return TensorboardLogger(exp_name=exp_name, log_dir=str(log_dir))
+    if backend == "wandb":
+        from torchrl.record.loggers.wandb import WandbLogger
+
+        return WandbLogger(
+            exp_name=exp_name,
+            offline=wandb_mode == "offline",
+            save_dir=str(log_dir),
+            project=project,
+            mode=wandb_mode,
+        )
+    if backend == "mlflow":
+        from torchrl.record.loggers.mlflow import MLFlowLogger
+
+        return MLFlowLogger(exp_name=exp_name, tracking_uri=(log_dir / "mlruns").resolve().as_uri())
+    raise ValueError(
+        f"Unknown logger backend {backend!r}; valid are csv, tensorboard, wandb, mlflow, none."
+    )
+
+
+def _trim_csv(path: Path, max_step: int, step_index: int, has_header: bool) -> None:
+    """Drop rows whose step is beyond ``max_step`` (written after the last checkpoint)."""
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    header, body = (rows[:1], rows[1:]) if has_header else ([], rows)
+    kept = [r for r in body if r and float(r[step_index]) <= max_step]
+    if len(kept) != len(body):
+        with path.open("w", newline="") as f:
+            csv.writer(f).writerows(header + kept)
+
+
+class RunMetrics:
+    """Writes epoch rows to ``metrics.csv`` and every scalar to a torchrl logger."""
+
+    def __init__(self, run_dir: Path, logger: Logger | None, resume_frames: int | None = None):
+        self.path = Path(run_dir) / METRICS_FILE
+        self.logger = logger
+        self.columns: list[str] | None = None
+        if self.path.exists():
+            if resume_frames is None:
+                raise FileExistsError(
+                    f"{self.path} exists: resume the run (resume=<run dir>) or use a new directory."
+                )
+            with self.path.open(newline="") as f:
+                self.columns = next(csv.reader(f), None)
+            _trim_csv(self.path, resume_frames, self.columns.index(STEP_COLUMN), True)
+        scalars = getattr(getattr(logger, "experiment", None), "log_dir", None)
+        if resume_frames is not None and scalars is not None:
+            for file in Path(scalars, "scalars").glob("*.csv"):
+                _trim_csv(file, resume_frames, 0, False)
+
+    def log_scalars(self, values: dict[str, float], step: int) -> None:
+        if self.logger is None:
+            return
+        for name, value in values.items():
+            if value is not None and not (isinstance(value, float) and math.isnan(value)):
+                self.logger.log_scalar(name, float(value), step=step)
+
+    def log_epoch(self, row: dict[str, Any]) -> None:
+        """Append one row; the first row fixes the columns (later unknown keys are ignored)."""
+        if STEP_COLUMN not in row:
+            raise KeyError(f"an epoch row needs a {STEP_COLUMN!r} entry")
+        new_file = self.columns is None
+        if new_file:
+            self.columns = list(row)
+        with self.path.open("a", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
+            if new_file:
+                writer.writeheader()
+            writer.writerow(row)
+        self.log_scalars(
+            {k: v for k, v in row.items() if k != STEP_COLUMN and isinstance(v, int | float)},
+            step=int(row[STEP_COLUMN]),
+        )
+
+
+def read_metrics(run_dir: str | Path) -> list[dict[str, str]]:
+    """The rows of a run's ``metrics.csv``."""
+    with (Path(run_dir) / METRICS_FILE).open(newline="") as f:
+        return list(csv.DictReader(f))
