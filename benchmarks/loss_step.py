@@ -10,8 +10,10 @@ Actor: ``build_s3rl_actor`` (128x128); critics: ``build_qvalue_network`` (128x12
 reward critic, and for SAC-Lag one double cost critic (one cost). Variants:
 
 - ``sac``: torchrl ``SACLoss`` (loss_function="l2", alpha_init=0.005, like SACLagLoss);
-- ``sac_lag``: ``SACLagLoss`` with reward and cost critics in one vmapped call (default);
-- ``sac_lag_unfused``: ``SACLagLoss(fuse_critics=False)``: two vmapped calls.
+- ``sac_lag``: ``SACLagLoss`` as built by default here (``critic_eval="batched_mlp"``: all
+  critics in one chain of batched matmuls);
+- ``sac_lag_fused_vmap``: ``critic_eval="fused_vmap"`` (reward and cost critics in one vmap);
+- ``sac_lag_vmap``: ``critic_eval="vmap"`` (one vmap for the reward, one for the cost critics).
 
 Variants are timed in interleaved rounds (each round runs every variant for ``--steps`` steps)
 so that load from other processes hits all of them alike; the reported time is the median over
@@ -38,7 +40,8 @@ from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network
 from s3rl_torchrl.objectives import SACLagLoss, make_sac_lag_optimizers
 
 ENVS = {"halfcheetah": (17, 6), "humanoid": (376, 17)}
-VARIANTS = ("sac", "sac_lag", "sac_lag_unfused")
+VARIANTS = ("sac", "sac_lag", "sac_lag_fused_vmap", "sac_lag_vmap")
+CRITIC_EVAL = {"sac_lag": "batched_mlp", "sac_lag_fused_vmap": "fused_vmap", "sac_lag_vmap": "vmap"}
 BATCH = 256
 HIDDEN = (128, 128)
 
@@ -70,9 +73,7 @@ def make_loss(variant: str, obs_dim: int, act_dim: int):
         loss = SACLoss(actor, critics, loss_function="l2", alpha_init=0.005)
     else:
         costs = [build_cost_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
-        loss = SACLagLoss(
-            actor, critics, costs, num_costs=1, fuse_critics=variant == "sac_lag"
-        )
+        loss = SACLagLoss(actor, critics, costs, num_costs=1, critic_eval=CRITIC_EVAL[variant])
         loss.lagrangian = 0.3
     loss.make_value_estimator(gamma=0.99)
     return loss
@@ -99,11 +100,13 @@ class Stepper:
         self.updater.step()
 
 
-def timed(fn, n: int) -> float:
-    start = time.perf_counter()
+def timed(fn, n: int) -> tuple[float, float]:
+    """(wall, process CPU) milliseconds per call. With one thread the CPU time excludes the time
+    other processes hold the core, so it is the steadier number on a shared machine."""
+    wall, cpu = time.perf_counter(), time.process_time()
     for _ in range(n):
         fn()
-    return (time.perf_counter() - start) / n * 1e3
+    return (time.perf_counter() - wall) / n * 1e3, (time.process_time() - cpu) / n * 1e3
 
 
 def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
@@ -119,25 +122,31 @@ def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
         for _ in range(5):
             stepper.step()
         steppers[variant] = stepper
-    samples = {variant: [] for variant in variants}
+    walls = {variant: [] for variant in variants}
+    cpus = {variant: [] for variant in variants}
     for _ in range(rounds):
         for variant in variants:
-            samples[variant].append(timed(steppers[variant].step, steps))
+            wall, cpu = timed(steppers[variant].step, steps)
+            walls[variant].append(wall)
+            cpus[variant].append(cpu)
     result = {}
     for variant in variants:
-        median = statistics.median(samples[variant])
+        wall, cpu = statistics.median(walls[variant]), statistics.median(cpus[variant])
         entry = {
-            "ms_per_step": round(median, 3),
-            "ms_per_step_rounds": [round(s, 3) for s in samples[variant]],
+            "wall_ms": round(wall, 3),
+            "cpu_ms": round(cpu, 3),
+            "wall_ms_rounds": [round(x, 3) for x in walls[variant]],
+            "cpu_ms_rounds": [round(x, 3) for x in cpus[variant]],
         }
         if compiled:
-            entry["compile_s"] = round(warmup_s[variant] - 3 * median / 1e3, 2)
+            entry["compile_s"] = round(warmup_s[variant] - 3 * wall / 1e3, 2)
         result[variant] = entry
     if "sac" in result:
         for variant in variants:
             if variant != "sac":
-                ratio = result[variant]["ms_per_step"] / result["sac"]["ms_per_step"]
-                result[variant]["ratio_to_sac"] = round(ratio, 3)
+                for key in ("wall_ms", "cpu_ms"):
+                    ratio = result[variant][key] / result["sac"][key]
+                    result[variant][f"{key[:-3]}_ratio_to_sac"] = round(ratio, 3)
     return result
 
 
@@ -160,10 +169,13 @@ def main() -> None:
             res = bench(env, mode, args.variants, args.steps, args.rounds)
             results.setdefault(env, {})[mode] = res
             for variant, entry in res.items():
-                extra = f"  compile {entry['compile_s']} s" if "compile_s" in entry else ""
-                ratio = f"  x{entry['ratio_to_sac']}" if "ratio_to_sac" in entry else ""
-                print(f"{env:12s} {mode:8s} {variant:16s} {entry['ms_per_step']:8.2f} ms{ratio}{extra}",
-                      flush=True)
+                line = f"{env:12s} {mode:8s} {variant:19s} wall {entry['wall_ms']:7.2f} ms"
+                line += f"  cpu {entry['cpu_ms']:7.2f} ms"
+                if "wall_ratio_to_sac" in entry:
+                    line += f"  x{entry['wall_ratio_to_sac']:.2f} wall x{entry['cpu_ratio_to_sac']:.2f} cpu"
+                if "compile_s" in entry:
+                    line += f"  compile {entry['compile_s']} s"
+                print(line, flush=True)
     payload = {
         "command": "python benchmarks/loss_step.py " + " ".join(
             f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"

@@ -151,20 +151,23 @@ class _SafetyPartition:
 def _distinct_uniform(n: int, k: int, generator) -> torch.Tensor:
     """``k`` distinct integers in ``[0, n)``, a uniformly random ordered sample, in O(k) time.
 
-    Rejection of repeated draws (used when ``k <= n / 4``, so few repeats) gives a set whose law is
-    invariant under relabelling of ``[0, n)``, hence uniform over k-subsets; the final permutation
-    makes the order uniform too, so any fixed split of the result (anchors | positives) pairs
-    slots at random. A full ``randperm(n)`` would cost O(n) per batch.
+    For ``k <= n / 4``: draw a few more than ``k`` with replacement, keep the distinct values and
+    draw again if fewer than ``k`` remain. Every step treats the values of ``[0, n)`` alike, so
+    the set obtained is a uniformly random subset of its size; a uniformly random ``k`` of them,
+    in random order, is then a uniform ordered sample without replacement, and any fixed split
+    of it (anchors | positives) pairs slots at random. A full ``randperm(n)`` would cost O(n).
     """
     if k > n:
         raise ValueError(f"cannot draw {k} distinct indices out of {n}")
     if 4 * k >= n:
         return torch.randperm(n, generator=generator)[:k]
-    chosen = torch.unique(torch.randint(n, (k,), generator=generator))
+    # About k^2 / 2n draws repeat; twice that plus a margin makes one round enough nearly always.
+    draws = k + 2 * k * k // n + 8
+    chosen = torch.unique(torch.randint(n, (draws,), generator=generator))
     while chosen.numel() < k:
-        extra = torch.randint(n, (k - chosen.numel(),), generator=generator)
+        extra = torch.randint(n, (draws - chosen.numel(),), generator=generator)
         chosen = torch.unique(torch.cat([chosen, extra]))
-    return chosen[torch.randperm(k, generator=generator)]
+    return chosen[torch.randperm(chosen.numel(), generator=generator)[:k]]
 
 
 class SafeUnsafeSampler(Sampler):
@@ -345,8 +348,15 @@ class SafeUnsafeSampler(Sampler):
                 f"(True = safe), got dtype {label.dtype}. CostLabel writes ('next', 'safe') "
                 "from ('next', 'cost')."
             )
-        label = label[index.to(label.device)]
-        return label.reshape(index.numel(), -1).all(dim=-1).cpu()
+        label = label[index.to(label.device)].reshape(index.numel(), -1)
+        if label.shape[-1] != 1:
+            raise ValueError(
+                f"SafeUnsafeSampler: each storage slot must hold one transition with one label, "
+                f"but a slot's {self.label_key!r} has {label.shape[-1]} entries (stored shape "
+                f"{tuple(stored.get(self.label_key).shape)}). Flatten batched collector output "
+                "before extending: `rb.extend(data.reshape(-1))`."
+            )
+        return label[:, 0].cpu()
 
     # ------------------------------------------------------------------ sampling
     def _generator(self):
@@ -401,7 +411,7 @@ class SafeUnsafeSampler(Sampler):
             )
         if self.contrastive:
             num_triplets = batch_size // 3
-            safe = partition.draw(SAFE, 2 * num_triplets, generator, distinct=False)
+            safe = partition.draw(SAFE, 2 * num_triplets, generator, distinct=True)
             unsafe = partition.draw(UNSAFE, num_triplets, generator, distinct=True)
             role = torch.arange(3, dtype=torch.long).repeat_interleave(num_triplets)
             return torch.cat([safe, unsafe]), {CONTRASTIVE_ROLE_KEY: role}
@@ -427,22 +437,45 @@ class SafeUnsafeSampler(Sampler):
         tells whether the strata are large enough. Write, empty and checkpoint through the main
         buffer only (the view holds no state of its own).
         """
+        if int(num_triplets) < 1:
+            raise ValueError(f"num_triplets must be >= 1, got {num_triplets}.")
+        return SafeUnsafeSampler.view(replay_buffer, 3 * int(num_triplets), contrastive=True)
+
+    @staticmethod
+    def view(
+        replay_buffer: TensorDictReplayBuffer,
+        batch_size: int,
+        *,
+        contrastive: bool = False,
+        unsafe_fraction: float | None = None,
+    ) -> TensorDictReplayBuffer:
+        """A read-only buffer over ``replay_buffer``'s storage with another sampling mode.
+
+        Same sharing rules as :meth:`contrastive_view` (which is
+        ``view(rb, 3 * B, contrastive=True)``); e.g. ``view(rb, 256, unsafe_fraction=0.5)``
+        gives RL batches that oversample violations from the same storage.
+        """
         sampler = replay_buffer.sampler
         if not isinstance(sampler, SafeUnsafeSampler):
             raise TypeError(
-                "SafeUnsafeSampler.contrastive_view: the replay buffer's sampler must be a "
+                "SafeUnsafeSampler views: the replay buffer's sampler must be a "
                 f"SafeUnsafeSampler (it maintains the partition), got {type(sampler).__name__}."
             )
-        if int(num_triplets) < 1:
-            raise ValueError(f"num_triplets must be >= 1, got {num_triplets}.")
         owner = sampler._owner if sampler._owner is not None else sampler
-        view_sampler = SafeUnsafeSampler(owner.label_key, contrastive=True)
+        view_sampler = SafeUnsafeSampler(
+            owner.label_key, contrastive=contrastive, unsafe_fraction=unsafe_fraction
+        )
         view_sampler._owner = owner
+        batch_size = int(batch_size)
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}.")
+        if contrastive:
+            view_sampler._requirements(batch_size)  # rejects a batch size that is not 3 * B
         return TensorDictReplayBuffer(
             storage=replay_buffer.storage,
             sampler=view_sampler,
             writer=_ViewWriter(),
-            batch_size=3 * int(num_triplets),
+            batch_size=batch_size,
         )
 
     # ------------------------------------------------------------------ state

@@ -78,8 +78,10 @@ def _unbatched_action_spec(action_spec: TensorSpec) -> Bounded:
     low, high = single.space.low, single.space.high
     batched_low = action_spec.space.low.reshape(-1, low.shape[-1])
     batched_high = action_spec.space.high.reshape(-1, high.shape[-1])
-    if not (torch.equal(batched_low, low.expand_as(batched_low))
-            and torch.equal(batched_high, high.expand_as(batched_high))):
+    if not (
+        torch.equal(batched_low, low.expand_as(batched_low))
+        and torch.equal(batched_high, high.expand_as(batched_high))
+    ):
         raise ValueError(
             "build_s3rl_actor: the batched action_spec has different bounds per env; pass the "
             "spec of one env."

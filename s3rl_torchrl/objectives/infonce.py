@@ -174,9 +174,7 @@ class SafetyInfoNCELoss(LossModule):
             )
         super().__init__()
         self.momentum_encoder = bool(momentum_encoder)
-        self.convert_to_functional(
-            encoder, "encoder", create_target_params=self.momentum_encoder
-        )
+        self.convert_to_functional(encoder, "encoder", create_target_params=self.momentum_encoder)
         self.register_buffer("temperature", torch.tensor(_check_temperature(temperature)))
         self.reduction = reduction
 

@@ -26,16 +26,22 @@ import torch
 from tensordict import TensorDict, TensorDictBase, TensorDictParams
 from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, dispatch
 from tensordict.utils import NestedKey
-from torch import Tensor
+from torch import Tensor, nn
 from torchrl.data.tensor_specs import TensorSpec
 from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.modules import MLP, ValueOperator
 from torchrl.objectives.sac import SACLoss, compute_rsample_log_prob
 from torchrl.objectives.utils import ValueEstimators, _vmap_func, distance_loss
 
 __all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers"]
 
 _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
-_FUSE_CHOICES = ("auto", True, False)
+_CRITIC_EVAL_CHOICES = ("auto", "batched_mlp", "fused_vmap", "vmap")
+# Elementwise activations: applying them to [N, batch, features] equals applying them per net.
+_ELEMENTWISE = (
+    nn.ReLU, nn.ReLU6, nn.LeakyReLU, nn.ELU, nn.SELU, nn.CELU, nn.GELU, nn.SiLU, nn.Mish,
+    nn.Tanh, nn.Sigmoid, nn.Softplus, nn.Identity,
+)
 
 
 def _next(key: NestedKey) -> tuple[str, ...]:
@@ -44,6 +50,66 @@ def _next(key: NestedKey) -> tuple[str, ...]:
 
 def _is_module_list(module) -> bool:
     return isinstance(module, (list, tuple))
+
+
+class _BatchedMLP:
+    """``N`` critics of one torchrl ``MLP`` architecture as a chain of batched matmuls.
+
+    Equivalent to vmapping the module over stacked parameters ``[N, ...]``, minus the
+    functional-call and vmap overhead that dominates at RL sizes (``docs/objectives.md``).
+    Built only for ``TensorDictModule(MLP)`` critics whose layers are ``nn.Linear`` and
+    elementwise activations; anything else (dropout, norms, custom modules) uses vmap.
+    """
+
+    def __init__(self, in_keys, layers):
+        self.in_keys = list(in_keys)
+        self.layers = layers  # ("linear", weight key, bias key) or ("act", module)
+
+    @classmethod
+    def from_module(cls, module, params: TensorDictBase) -> _BatchedMLP | None:
+        if type(module) not in (TensorDictModule, ValueOperator) or len(module.out_keys) != 1:
+            return None
+        mlp = module.module
+        if type(mlp) is not MLP or getattr(mlp, "_reshape_out", True):
+            return None
+        flat_keys = set(params.flatten_keys().keys())
+        layers, expected = [], set()
+        for name, layer in mlp.named_children():
+            if type(layer) is nn.Linear:
+                if layer.bias is None:
+                    return None
+                weight, bias = ("module", name, "weight"), ("module", name, "bias")
+                layers.append(("linear", weight, bias))
+                expected.update((".".join(weight), ".".join(bias)))
+            elif type(layer) in _ELEMENTWISE:
+                layers.append(("act", layer))
+            else:
+                return None
+        if flat_keys != expected or not layers or layers[-1][0] != "linear":
+            return None
+        last_bias = params.get(layers[-1][2])
+        if last_bias.shape[-1] != 1:
+            return None
+        return cls(module.in_keys, layers)
+
+    def __call__(self, td: TensorDictBase, params: TensorDictBase) -> Tensor:
+        """Values ``[N, *batch]`` of the ``N`` critics whose parameters are stacked in ``params``."""
+        x = torch.cat([td.get(key) for key in self.in_keys], -1)
+        batch_shape = x.shape[:-1]
+        x = x.reshape(-1, x.shape[-1])
+        first = True
+        for layer in self.layers:
+            if layer[0] == "act":
+                x = layer[1](x)
+                continue
+            weight, bias = params.get(layer[1]), params.get(layer[2])
+            if first:
+                # The input is shared by all critics: broadcast [B, F] @ [N, F, out].
+                x = torch.matmul(x, weight.transpose(-1, -2)) + bias.unsqueeze(-2)
+                first = False
+            else:
+                x = torch.baddbmm(bias.unsqueeze(-2), x, weight.transpose(-1, -2))
+        return x.squeeze(-1).reshape(x.shape[0], *batch_shape)
 
 
 class SACLagLoss(SACLoss):
@@ -83,9 +149,13 @@ class SACLagLoss(SACLoss):
             the paper: ``True``; OmniSafe: ``False``).
         rescaling: divide the whole actor loss by ``1 + sum(lagrangian)`` (FSRL/paper: ``True``).
         lagrangian_init: initial ``lagrangian`` (float or ``m`` values, >= 0).
-        fuse_critics: evaluate the reward and cost critics in one vmapped call. ``"auto"``
-            fuses when the two critics have the same architecture (measured faster, see
-            ``docs/objectives.md``); ``True`` requires it; ``False`` never fuses.
+        critic_eval: how the critics are evaluated (same numbers up to float rounding, speed
+            differs, see ``docs/objectives.md``): ``"batched_mlp"`` runs every reward and cost
+            critic in one chain of batched matmuls (needs critics that are torchrl ``MLP``\ s of
+            ``Linear`` + elementwise activations with one architecture, e.g. from
+            ``build_qvalue_network``); ``"fused_vmap"`` runs them in one vmapped call (same
+            architecture, any module); ``"vmap"`` runs reward and cost critics in two vmapped
+            calls (any modules). ``"auto"`` (default) picks the first that applies.
         separate_losses, reduction, deactivate_vmap, use_prioritized_weights,
             scalar_output_mode: as in ``SACLoss``.
 
@@ -145,7 +215,7 @@ class SACLagLoss(SACLoss):
         entropy_in_cost_target: bool = True,
         rescaling: bool = True,
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
-        fuse_critics: bool | Literal["auto"] = "auto",
+        critic_eval: Literal["auto", "batched_mlp", "fused_vmap", "vmap"] = "auto",
         separate_losses: bool = False,
         reduction: str | None = None,
         deactivate_vmap: bool = False,
@@ -172,9 +242,10 @@ class SACLagLoss(SACLoss):
                 f"Unknown loss_function {loss_function!r}; valid choices are "
                 f"{', '.join(_LOSS_FUNCTIONS)}."
             )
-        if fuse_critics not in _FUSE_CHOICES or not isinstance(fuse_critics, (bool, str)):
+        if critic_eval not in _CRITIC_EVAL_CHOICES:
             raise ValueError(
-                f"Unknown fuse_critics {fuse_critics!r}; valid choices are 'auto', True, False."
+                f"Unknown critic_eval {critic_eval!r}; valid choices are "
+                f"{', '.join(map(repr, _CRITIC_EVAL_CHOICES))}."
             )
         if not (alpha_init > 0 and math.isfinite(alpha_init)):
             raise ValueError(f"alpha_init must be a positive finite number, got {alpha_init!r}.")
@@ -232,20 +303,13 @@ class SACLagLoss(SACLoss):
                 create_target_params=delay_qvalue,
                 compare_against=policy_params,
             )
-            fusable = self._critics_fusable()
-            if fuse_critics is True and not fusable:
-                raise ValueError(
-                    "fuse_critics=True needs reward and cost critics with the same architecture "
-                    "and input keys; pass fuse_critics='auto' or False."
-                )
-            self._fused = fusable and fuse_critics in ("auto", True)
         else:
             self.cost_qvalue_network = None
-            self._fused = False
+        self._critic_eval = self._resolve_critic_eval(critic_eval)
         self._make_cost_vmap()
 
     # ------------------------------------------------------------------ configuration
-    def _critics_fusable(self) -> bool:
+    def _same_architecture(self) -> bool:
         reward, cost = self.qvalue_network, self.cost_qvalue_network
         if list(reward.in_keys) != list(cost.in_keys) or len(reward.out_keys) != 1:
             return False
@@ -262,10 +326,35 @@ class SACLagLoss(SACLoss):
             for k in params_r.keys()
         )
 
+    def _resolve_critic_eval(self, choice: str) -> str:
+        same = self.num_costs == 0 or self._same_architecture()
+        batched = _BatchedMLP.from_module(self.qvalue_network, self.qvalue_network_params)
+        if batched is not None and self.num_costs:
+            cost_batched = _BatchedMLP.from_module(
+                self.cost_qvalue_network, self.cost_qvalue_network_params
+            )
+            if cost_batched is None or not same:
+                batched = None
+        self._batched_mlp = batched
+        available = {"batched_mlp": batched is not None, "fused_vmap": same, "vmap": True}
+        if choice == "auto":
+            return next(mode for mode, ok in available.items() if ok)
+        if not available[choice]:
+            need = (
+                "critics that are torchrl MLPs (Linear + elementwise activations) with one "
+                "architecture for reward and costs"
+                if choice == "batched_mlp"
+                else "reward and cost critics with the same architecture and input keys"
+            )
+            raise ValueError(
+                f"critic_eval={choice!r} needs {need}; use 'auto' or 'vmap'."
+            )
+        return choice
+
     @property
-    def fused_critics(self) -> bool:
-        """Whether reward and cost critics are evaluated in one vmapped call."""
-        return self._fused
+    def critic_eval(self) -> str:
+        """The critic evaluation actually used: ``"batched_mlp"``, ``"fused_vmap"`` or ``"vmap"``."""
+        return self._critic_eval
 
     def _make_cost_vmap(self) -> None:
         if getattr(self, "num_costs", 0) > 0:
@@ -346,22 +435,30 @@ class SACLagLoss(SACLoss):
     ) -> tuple[Tensor, Tensor | None]:
         """All critics on ``td``: reward ``[N, *B]`` and cost ``[m, N, *B]`` values."""
         n, m = self.num_qvalue_nets, self.num_costs
-        value_key = self.tensor_keys.state_action_value
-        if self._fused:
-            params = torch.cat([reward_params, cost_params], 0)
+        mode = self._critic_eval
+        if mode == "vmap" or m == 0:
+            if mode == "batched_mlp":
+                reward = self._batched_mlp(td, reward_params)
+            else:
+                value_key = self.tensor_keys.state_action_value
+                reward = self._vmap_qnetworkN0(td, reward_params).get(value_key).squeeze(-1)
+            if m == 0:
+                return reward, None
+            td_cost = td.select(*self.cost_qvalue_network.in_keys, strict=False)
+            cost = self._vmap_cost_qnetworkN0(td_cost, cost_params)
+            cost = cost.get(self.tensor_keys.state_action_cost_value).squeeze(-1)
+            return reward, cost.unflatten(0, (m, n))
+        params = torch.cat([reward_params, cost_params], 0)
+        if mode == "batched_mlp":
+            values = self._batched_mlp(td, params)
+        else:
+            value_key = self.tensor_keys.state_action_value
             values = self._vmap_qnetworkN0(td, params).get(value_key).squeeze(-1)
-            return values[:n], values[n:].unflatten(0, (m, n))
-        reward = self._vmap_qnetworkN0(td, reward_params).get(value_key).squeeze(-1)
-        if m == 0:
-            return reward, None
-        td_cost = td.select(*self.cost_qvalue_network.in_keys, strict=False)
-        cost = self._vmap_cost_qnetworkN0(td_cost, cost_params)
-        cost = cost.get(self.tensor_keys.state_action_cost_value).squeeze(-1)
-        return reward, cost.unflatten(0, (m, n))
+        return values[:n], values[n:].unflatten(0, (m, n))
 
     def _critic_input(self, tensordict: TensorDictBase) -> TensorDictBase:
         keys = list(self.qvalue_network.in_keys)
-        if self.num_costs and not self._fused:
+        if self.num_costs and self._critic_eval == "vmap":
             keys += list(self.cost_qvalue_network.in_keys)
         return tensordict.select(*keys, strict=False)
 
@@ -447,7 +544,7 @@ class SACLagLoss(SACLoss):
             entries[est_keys.steps_to_next_obs] = steps.reshape(
                 *tensordict.batch_size, 1
             ).expand(shape)
-        td = TensorDict(entries, batch_size=tensordict.batch_size, device=rewards.device)
+        td = TensorDict(entries, batch_size=tensordict.batch_size)
         return estimator.value_estimate(td, next_value=next_value)
 
     # ------------------------------------------------------------------ losses

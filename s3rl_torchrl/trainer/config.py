@@ -259,12 +259,14 @@ class EvalRunConfig:
     episodes: int = 10
     num_envs: int = 2
     seed: int = 0
+    max_steps: int = 1000
     video: bool = False
     video_path: str | None = None
 
     def check(self, path: str = "") -> None:
         _check_range("episodes", self.episodes, 1)
         _check_range("num_envs", self.num_envs, 1)
+        _check_range("max_steps", self.max_steps, 1)
 
 
 def register_configs() -> None:

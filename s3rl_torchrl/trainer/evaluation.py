@@ -122,3 +122,26 @@ def format_table(rows: dict[str, EvalResult], title: str = "Final evaluation") -
             f"{r.safe_occupancy:.1f} |"
         )
     return "\n".join(lines)
+
+
+def record_video(
+    env: EnvBase, policy, path: str | Path, max_steps: int = 1000, fps: int = 30
+) -> Path:
+    """Roll out one deterministic episode on a ``from_pixels`` env and write its frames.
+
+    ``env`` must emit ``"pixels"`` (``make_env(..., from_pixels=True, pixels_only=False)``,
+    MuJoCo offscreen rendering: on a headless machine set ``MUJOCO_GL=egl`` or ``osmesa``).
+    The format follows the suffix (``.mp4`` needs ``imageio-ffmpeg``; ``.gif`` works as is).
+    """
+    import imageio.v2 as imageio
+
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        rollout = env.rollout(max_steps, policy)
+    frames = rollout["pixels"].reshape(-1, *rollout["pixels"].shape[-3:]).cpu().numpy()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".gif":
+        imageio.mimsave(path, list(frames), duration=1000 / fps)
+    else:
+        imageio.mimsave(path, list(frames), fps=fps)
+    return path

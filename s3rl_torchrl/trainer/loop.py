@@ -54,11 +54,21 @@ from s3rl_torchrl.trainer.metrics import RunMetrics, make_torchrl_logger
 
 FINAL_EVAL_FILE = "final_eval.json"
 LOSS_DIAGNOSTICS = (
-    "loss_actor", "loss_qvalue", "loss_cost_qvalue", "loss_alpha", "alpha", "entropy",
-    "reward_q", "cost_q",
+    "loss_actor",
+    "loss_qvalue",
+    "loss_cost_qvalue",
+    "loss_alpha",
+    "alpha",
+    "entropy",
+    "reward_q",
+    "cost_q",
 )
 CONTRASTIVE_DIAGNOSTICS = (
-    "loss_infonce", "pos_similarity", "neg_similarity", "accuracy", "mi_lower_bound",
+    "loss_infonce",
+    "pos_similarity",
+    "neg_similarity",
+    "accuracy",
+    "mi_lower_bound",
 )
 CONFIG_FILE = "config.json"
 # Config fields the saved weights and buffer depend on: a resume must not change them.
@@ -372,7 +382,9 @@ class Trainer:
                 if opt is not None
             },
             "lagrangian": agent.lagrangian.state_dict() if agent.lagrangian is not None else None,
-            "contrastive": agent.contrastive.state_dict() if agent.contrastive is not None else None,
+            "contrastive": agent.contrastive.state_dict()
+            if agent.contrastive is not None
+            else None,
             "rng": capture_rng_state(),
         }
 

@@ -252,6 +252,19 @@ def test_uniform_mode_is_uniform_over_the_buffer():
     assert _chisquare_uniform(counts) > 1e-3
 
 
+def test_stratified_view_shares_the_main_partition():
+    rb = make_buffer(60, seed=2)
+    rb.extend(transitions([True] * 50 + [False] * 10))
+    oversampled = SafeUnsafeSampler.view(rb, 20, unsafe_fraction=0.5)
+    assert int((~oversampled.sample()["next", "safe"]).sum()) == 10
+    rb.extend(transitions([False] * 10, start=100))  # slots 0..9 become unsafe
+    assert (oversampled.sampler.num_safe, oversampled.sampler.num_unsafe) == (40, 20)
+    ids = torch.cat([oversampled.sample()["observation"].squeeze(-1) for _ in range(20)])
+    assert (ids >= 100).any() and not ((ids >= 0) & (ids < 10)).any()
+    with pytest.raises(ValueError, match="3 \\* B"):
+        SafeUnsafeSampler.view(rb, 20, contrastive=True)
+
+
 def test_stratified_mode_needs_each_requested_stratum():
     rb = make_buffer(20, unsafe_fraction=0.5)
     rb.extend(transitions([True] * 20))
@@ -301,9 +314,10 @@ def test_state_dict_round_trip():
     rb = _filled_buffer()
     state = rb.state_dict()
     restored = make_buffer(50, seed=999)
+    restored_view = SafeUnsafeSampler.contrastive_view(restored, 6)  # made before loading
     restored.load_state_dict(state)
     _assert_same_partition(rb.sampler, restored.sampler)
-    view, restored_view = (SafeUnsafeSampler.contrastive_view(b, 6) for b in (rb, restored))
+    view = SafeUnsafeSampler.contrastive_view(rb, 6)
     assert _sequence(rb, view) == _sequence(restored, restored_view)
     more = transitions([False] * 9, start=1000)
     rb.extend(more)
@@ -353,6 +367,14 @@ def test_storage_filled_behind_the_samplers_back_is_detected_and_rebuilt():
     assert rb.sample(9)["contrastive_role"].tolist() == [0] * 3 + [1] * 3 + [2] * 3
 
 
+def test_direct_item_assignment_needs_mark_update():
+    rb = make_buffer(6)
+    rb.extend(transitions([True] * 6))
+    rb[torch.tensor([1, 4])] = transitions([False, False])  # bypasses the writer
+    rb.mark_update(torch.tensor([1, 4]))
+    assert partition_sets(rb.sampler) == ({0, 2, 3, 5}, {1, 4})
+
+
 def test_view_is_read_only():
     rb = make_buffer(10)
     view = SafeUnsafeSampler.contrastive_view(rb, 2)
@@ -384,6 +406,9 @@ def test_bad_data_errors():
     )
     with pytest.raises(TypeError, match="bool"):
         not_bool.extend(transitions([True, False]))
+    unflattened = TensorDictReplayBuffer(storage=LazyTensorStorage(10), sampler=SafeUnsafeSampler())
+    with pytest.raises(ValueError, match="reshape\\(-1\\)"):
+        unflattened.extend(transitions([True] * 6).reshape(2, 3))  # 2 slots of 3 steps each
     two_dim = TensorDictReplayBuffer(
         storage=LazyTensorStorage(10, ndim=2), sampler=SafeUnsafeSampler()
     )

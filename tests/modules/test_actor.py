@@ -8,7 +8,6 @@ import math
 import pytest
 import torch
 from tensordict import TensorDict
-from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer, Unbounded
 from torchrl.envs.utils import ExplorationType, set_exploration_type
@@ -184,7 +183,9 @@ def snapshot(module: nn.Module) -> dict[str, torch.Tensor]:
 def test_phase_moves_only_the_encoder_and_lowers_the_loss():
     actor, critic = make_actor(hidden=(32, 32)), make_critic()
     encoder = get_policy_encoder(actor)
-    encoder_names = {n for n, p in actor.named_parameters() if any(p is q for q in encoder.parameters())}
+    encoder_names = {
+        n for n, p in actor.named_parameters() if any(p is q for q in encoder.parameters())
+    }
     view = SafeUnsafeSampler.contrastive_view(separable_buffer(), 32)
     loss = SafetyInfoNCELoss(encoder)
     phase = ContrastivePhase(loss, view, 1e-2, num_steps=30)
@@ -203,8 +204,13 @@ def test_phase_moves_only_the_encoder_and_lowers_the_loss():
     for name, value in snapshot(critic).items():
         assert torch.equal(value, critic_before[name]), name
     assert all(p.grad is None for p in actor.parameters())
-    assert set(stats) == {"loss_infonce", "pos_similarity", "neg_similarity", "accuracy",
-                          "mi_lower_bound"}
+    assert set(stats) == {
+        "loss_infonce",
+        "pos_similarity",
+        "neg_similarity",
+        "accuracy",
+        "mi_lower_bound",
+    }
     assert stats["mi_lower_bound"] == pytest.approx(math.log(33) - stats["loss_infonce"], rel=1e-5)
     assert phase.num_runs == 1 and phase.num_skipped == 0
 
@@ -213,8 +219,9 @@ def test_phase_skips_without_enough_unsafe_data():
     actor = make_actor(hidden=(16,))
     rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100), sampler=SafeUnsafeSampler())
     safe = torch.tensor([True] * 90 + [False] * 7)
-    rb.extend(TensorDict(observation=torch.randn(97, 5), next={"safe": safe[:, None]},
-                         batch_size=[97]))
+    rb.extend(
+        TensorDict(observation=torch.randn(97, 5), next={"safe": safe[:, None]}, batch_size=[97])
+    )
     phase = ContrastivePhase(
         SafetyInfoNCELoss(get_policy_encoder(actor)), SafeUnsafeSampler.contrastive_view(rb, 8)
     )
@@ -222,8 +229,13 @@ def test_phase_skips_without_enough_unsafe_data():
     assert phase.run() is None
     assert phase.num_skipped == 1
     assert all(torch.equal(v, snapshot(actor)[k]) for k, v in before.items())
-    rb.extend(TensorDict(observation=torch.randn(1, 5), next={"safe": torch.zeros(1, 1, dtype=bool)},
-                         batch_size=[1]))
+    rb.extend(
+        TensorDict(
+            observation=torch.randn(1, 5),
+            next={"safe": torch.zeros(1, 1, dtype=bool)},
+            batch_size=[1],
+        )
+    )
     assert phase.can_run()
 
 
@@ -274,13 +286,15 @@ def test_end_to_end_on_env_data():
 
     torch.manual_seed(0)
     env = make_env("SafetySwimmerVelocity-v1", seed=0)
-    actor = build_s3rl_actor(env.observation_spec["observation"].shape[-1], env.action_spec,
-                             hidden=(32, 32))
+    actor = build_s3rl_actor(
+        env.observation_spec["observation"].shape[-1], env.action_spec, hidden=(32, 32)
+    )
     with torch.no_grad():
         rollout = env.rollout(300, actor, break_when_any_done=False)
     env.close()
-    rb = TensorDictReplayBuffer(storage=LazyTensorStorage(1000), sampler=SafeUnsafeSampler(),
-                                batch_size=64)
+    rb = TensorDictReplayBuffer(
+        storage=LazyTensorStorage(1000), sampler=SafeUnsafeSampler(), batch_size=64
+    )
     rb.extend(rollout)
     view = SafeUnsafeSampler.contrastive_view(rb, 8)
     assert rb.sample()["observation"].shape == (64, 8)

@@ -157,8 +157,9 @@ def test_gradients_reach_only_the_policy_encoder():
     torch.manual_seed(0)
     spec = Bounded(-torch.ones(2), torch.ones(2), shape=(2,))
     actor = build_s3rl_actor(4, spec, hidden=(16, 8))
-    critic = ValueOperator(MLP(in_features=6, out_features=1, num_cells=[16]),
-                           in_keys=["observation", "action"])
+    critic = ValueOperator(
+        MLP(in_features=6, out_features=1, num_cells=[16]), in_keys=["observation", "action"]
+    )
     encoder = get_policy_encoder(actor)
     loss_module = SafetyInfoNCELoss(encoder)
     batch = triplet_batch(torch.randn(5, 4), torch.randn(5, 4), torch.randn(5, 4))
@@ -207,8 +208,11 @@ def test_momentum_encoder_targets_and_soft_update():
 def test_module_works_on_sampler_batches():
     rb = TensorDictReplayBuffer(storage=LazyTensorStorage(64), sampler=SafeUnsafeSampler())
     safe = torch.tensor([i % 2 == 0 for i in range(64)])
-    rb.extend(TensorDict({"observation": torch.randn(64, 3), "next": {"safe": safe[:, None]}},
-                         batch_size=[64]))
+    rb.extend(
+        TensorDict(
+            {"observation": torch.randn(64, 3), "next": {"safe": safe[:, None]}}, batch_size=[64]
+        )
+    )
     view = SafeUnsafeSampler.contrastive_view(rb, 8)
     batch = view.sample()
     out = SafetyInfoNCELoss(identity_encoder())(batch)

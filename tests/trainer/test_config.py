@@ -1,0 +1,103 @@
+"""Config schemas: every YAML is type-checked, bad values fail before training, naming the field."""
+
+from __future__ import annotations
+
+import pytest
+from hydra.errors import ConfigCompositionException
+from omegaconf.errors import ValidationError
+
+from s3rl_torchrl.envs import task_names
+from s3rl_torchrl.trainer import ConfigError, TrainConfig, validate
+from s3rl_torchrl.trainer.config import ALGO_NAMES
+
+
+def test_defaults_are_quick_s3rl_on_half_cheetah(compose):
+    cfg = validate(compose())
+    assert cfg.task.name == "SafetyHalfCheetahVelocity-v1"
+    assert cfg.algo.name == "s3rl" and cfg.algo.lagrangian == "pid" and cfg.algo.contrastive
+
+
+@pytest.mark.parametrize("algo", ALGO_NAMES)
+@pytest.mark.parametrize("experiment", ["quick", "paper", "tiny"])
+def test_every_algo_and_experiment_composes(algo, experiment, compose):
+    cfg = validate(compose(f"algo={algo}", f"experiment={experiment}"))
+    assert cfg.algo.name == algo
+    expect_lag = algo in ("s3rl", "sac_lag")
+    assert (cfg.algo.lagrangian != "none") == expect_lag
+    assert cfg.algo.contrastive == algo.startswith("s3rl")
+
+
+@pytest.mark.parametrize("task", task_names())
+def test_every_registered_task_is_a_config_option(task, compose):
+    assert validate(compose(f"task={task}")).task.name == task
+
+
+def test_paper_experiment_matches_table_3(compose):
+    cfg = validate(compose("experiment=paper"))
+    c, a = cfg.collector, cfg.algo
+    assert (c.total_frames, c.frames_per_epoch, c.num_envs, cfg.eval.num_envs) == (
+        1_000_000, 10_000, 10, 2,
+    )
+    assert (a.batch_size, a.update_per_step, a.buffer_size, a.n_step) == (256, 0.2, 100_000, 2)
+    assert (a.actor_lr, a.critic_lr, a.alpha_lr, a.alpha_init, a.tau, a.gamma) == (
+        5e-4, 1e-3, 3e-4, 0.005, 0.05, 0.99,
+    )
+    assert (a.pid.kp, a.pid.ki, a.pid.kd) == (0.05, 0.0005, 0.1)
+    assert (a.contrastive_cfg.update_interval, a.contrastive_cfg.steps) == (1000, 50)
+    assert a.contrastive_cfg.temperature == 0.7 and a.rescaling
+    assert cfg.network.actor_hidden == [128, 128] and cfg.save_interval == 4
+    assert cfg.task.cost_limit == 10.0
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("algo.update_per_step=-1", "'algo.update_per_step'"),
+        ("algo.lagrangian=lqr", "allowed values are pid, learned, none"),
+        ("collector.batching=threads", "allowed values are sync_vector"),
+        ("algo.gamma=1.5", "must be in [0.0, 1.0]"),
+        ("logger.backend=neptune", "allowed values are csv, tensorboard, wandb, mlflow, none"),
+        ("network.activation=gelu", "allowed values are relu, tanh, elu, silu"),
+        ("collector.frames_per_epoch=150", "multiple of collector.frames_per_batch"),
+        ("algo.contrastive_cfg.temperature=0", "'algo.contrastive_cfg.temperature'"),
+    ],
+)
+def test_bad_values_name_the_field_and_the_valid_choices(override, message, compose):
+    with pytest.raises(ConfigError) as err:
+        validate(compose(override))
+    assert message in str(err.value)
+
+
+def test_bad_types_and_unknown_keys_fail_at_composition(compose):
+    with pytest.raises(ConfigCompositionException) as err:
+        compose("algo.batch_size=big")
+    assert "algo.batch_size" in str(err.value.__cause__) or "batch_size" in str(err.value)
+    with pytest.raises(ConfigCompositionException):
+        compose("algo.not_a_field=1")
+    with pytest.raises(ConfigCompositionException) as err:
+        compose("algo=ppo")
+    assert "s3rl" in str(err.value) and "sac_lag" in str(err.value)  # lists the options
+    with pytest.raises(ConfigCompositionException):
+        compose("task=SafetyCheetahVelocity-v1")
+
+
+def test_python_dataclass_is_validated_too():
+    cfg = TrainConfig()
+    cfg.task.name = "SafetyHopperVelocity-v1"
+    cfg.algo.batch_size = 0
+    with pytest.raises(ConfigError, match="algo.batch_size"):
+        validate(cfg)
+
+
+def test_yaml_types_are_checked_against_the_schema(compose):
+    with pytest.raises((ConfigCompositionException, ValidationError)):
+        compose("collector.num_envs=1.5")
+
+
+def test_experiment_overrides_the_primary_config(compose):
+    # The experiment comes after _self_ in the defaults list: its values win over train.yaml's.
+    cfg = validate(compose("experiment=tiny"))
+    assert cfg.threads == 1 and cfg.save_interval == 1
+    assert validate(compose("experiment=paper")).save_interval == 4
+    # ... and the command line wins over both.
+    assert validate(compose("experiment=tiny", "threads=2")).threads == 2

@@ -1,0 +1,163 @@
+"""End-to-end training runs on tiny settings: every algo, counters, files, resume, signals."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import pytest
+import torch
+
+from s3rl_torchrl.trainer import Trainer, train
+from s3rl_torchrl.trainer.config import ALGO_NAMES
+from s3rl_torchrl.trainer.metrics import read_metrics
+
+FINAL_EVAL_KEYS = {
+    "reward_mean", "reward_std", "cost_mean", "cost_std", "length_mean", "safe_occupancy",
+    "episodes",
+}
+
+
+def expected_grad_steps(cfg) -> int:
+    """The schedule by hand: update_per_step per frame of every batch that ends at or after
+    init_random_frames (FSRL starts learning after the warm-up)."""
+    c = cfg.collector
+    ends = range(c.frames_per_batch, c.total_frames + 1, c.frames_per_batch)
+    owed = sum(cfg.algo.update_per_step * c.frames_per_batch for end in ends
+               if end >= c.init_random_frames)
+    return int(owed)
+
+
+@pytest.mark.parametrize("algo", ALGO_NAMES)
+def test_tiny_run_per_algo(algo, tiny_config, tmp_path):
+    # Swimmer-v1 pays costs under a random policy now and then: both strata fill up, so the
+    # contrastive phase runs and lambda moves.
+    cfg = tiny_config(f"algo={algo}", "task=SafetySwimmerVelocity-v1", "task.cost_limit=0")
+    result = train(cfg, tmp_path)
+    c = result.counters
+    assert result.status == "finished"
+    assert c.frames == cfg.collector.total_frames
+    assert c.grad_steps == expected_grad_steps(cfg)
+    assert c.epochs == cfg.collector.total_frames // cfg.collector.frames_per_epoch
+
+    final = json.loads((tmp_path / "final_eval.json").read_text())
+    assert set(final) == FINAL_EVAL_KEYS and final["episodes"] == cfg.eval.final_episodes
+    rows = read_metrics(tmp_path)
+    assert [int(r["frames"]) for r in rows] == [200, 400, 600]
+    assert (tmp_path / "checkpoints" / "latest" / "state.pt").is_file()
+    assert (tmp_path / "config.json").is_file()
+
+    if algo.startswith("s3rl"):
+        assert c.contrastive_phases > 0
+        assert rows[-1]["contrastive/loss_infonce"] != "nan"
+    else:
+        assert c.contrastive_phases == 0
+    lagrangian = [float(r["lagrangian"]) for r in rows]
+    if algo in ("s3rl", "sac_lag"):
+        # Swimmer episodes last 1000 steps: none ends in 600 frames, so lambda never moves.
+        assert c.lagrangian_updates == 0 and lagrangian == [0.0, 0.0, 0.0]
+    else:
+        assert result.final_eval is not None and lagrangian == [0.0, 0.0, 0.0]
+
+
+def test_lagrangian_updates_once_per_batch_with_finished_episodes(tiny_config, tmp_path):
+    # Hopper falls within ~20 random steps: every batch ends episodes. A zero cost limit and
+    # costs under a random policy make the PID output positive.
+    cfg = tiny_config("algo=sac_lag", "task=SafetyHopperVelocity-v0", "task.cost_limit=0")
+    seen = []
+    result = train(cfg, tmp_path, on_epoch_end=lambda t, row: seen.append(row["lagrangian"]))
+    batches = cfg.collector.total_frames // cfg.collector.frames_per_batch
+    assert result.counters.lagrangian_updates == batches
+    assert result.counters.episodes > batches
+
+
+def _counters(result):
+    c = dict(vars(result.counters))
+    return c
+
+
+def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
+    cfg = tiny_config("algo=s3rl", "task=SafetySwimmerVelocity-v1")
+    full = train(cfg, tmp_path / "full")
+
+    def stop_after_first_epoch(trainer: Trainer, row):
+        if row["epoch"] == 1:
+            trainer.stop.requested = True
+
+    part = train(cfg, tmp_path / "part", on_epoch_end=stop_after_first_epoch)
+    assert part.status == "interrupted" and part.counters.frames == 200
+    assert not (tmp_path / "part" / "final_eval.json").exists()
+
+    cfg.resume = str(tmp_path / "part")
+    resumed = train(cfg, tmp_path / "ignored")
+    assert resumed.status == "finished" and resumed.run_dir == tmp_path / "part"
+    assert _counters(resumed) == _counters(full)
+    assert [r["frames"] for r in read_metrics(tmp_path / "part")] == ["200", "400", "600"]
+    assert (tmp_path / "part" / "final_eval.json").is_file()
+
+
+def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, monkeypatch):
+    cfg = tiny_config("algo=sac_lag")
+    full = train(cfg, tmp_path / "full")
+
+    original = Trainer._gradient_step
+
+    def stop_at_step_40(self):
+        original(self)
+        if self.counters.grad_steps == 40:
+            self.stop.requested = True
+
+    monkeypatch.setattr(Trainer, "_gradient_step", stop_at_step_40)
+    part = train(cfg, tmp_path / "part")
+    monkeypatch.setattr(Trainer, "_gradient_step", original)
+    assert part.status == "interrupted"
+    assert part.counters.grad_steps == 40 and part.counters.pending_updates > 0
+
+    cfg.resume = str(tmp_path / "part")
+    resumed = train(cfg, tmp_path / "ignored")
+    assert _counters(resumed) == _counters(full)
+    assert [r["frames"] for r in read_metrics(tmp_path / "part")] == ["200", "400", "600"]
+
+
+def test_crash_after_checkpoint_drops_unsaved_metric_rows(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac", "collector.total_frames=800", "save_interval=2")
+
+    def crash_at_epoch_3(trainer, row):
+        if row["epoch"] == 3:
+            raise RuntimeError("simulated crash")
+
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        train(cfg, tmp_path, on_epoch_end=crash_at_epoch_3)
+    # Epoch 3 was logged, but the last checkpoint is epoch 2's.
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "600"]
+    cfg.resume = str(tmp_path)
+    train(cfg, tmp_path / "ignored")
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "600", "800"]
+
+
+def test_sigterm_writes_a_checkpoint_and_stops(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac")
+    previous = signal.getsignal(signal.SIGTERM)
+
+    def send_sigterm(trainer, row):
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    result = train(cfg, tmp_path, on_epoch_end=send_sigterm)
+    assert result.status == "interrupted" and result.counters.epochs == 1
+    state = torch.load(tmp_path / "checkpoints/latest/state.pt", weights_only=True)
+    assert state["counters"]["frames"] == 200
+    assert signal.getsignal(signal.SIGTERM) == previous  # handler restored
+
+
+def test_resume_rejects_a_different_network(tiny_config, tmp_path):
+    from s3rl_torchrl.trainer import CheckpointError
+
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    train(cfg, tmp_path)
+    metrics_before = (tmp_path / "metrics.csv").read_text()
+    other = tiny_config("algo=sac", "collector.total_frames=200", "network.actor_hidden=[64,64]")
+    other.resume = str(tmp_path)
+    with pytest.raises(CheckpointError, match="network.actor_hidden"):
+        train(other, tmp_path / "x")
+    assert (tmp_path / "metrics.csv").read_text() == metrics_before  # nothing lost
