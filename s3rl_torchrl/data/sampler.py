@@ -209,8 +209,9 @@ class SafeUnsafeSampler(Sampler):
         contrastive (bool): contrastive triplet batches. Exclusive with ``unsafe_fraction``.
 
     .. note:: Only writes made through a replay buffer's writer (``extend`` / ``add``) are seen.
-       If the storage was filled some other way, call :meth:`rebuild` once (a full scan);
-       :meth:`sample` raises if the partition does not account for every stored transition.
+       After ``rb[idx] = data`` call ``rb.mark_update(idx)``. If the storage was filled some
+       other way, call :meth:`rebuild` once (a full scan); :meth:`sample` raises if the
+       partition does not account for every stored transition.
 
     Examples:
         >>> rb = TensorDictReplayBuffer(storage=LazyTensorStorage(100_000),

@@ -17,6 +17,7 @@ collected: a number for one cost, or ``m`` values.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from typing import Literal
@@ -301,7 +302,9 @@ class LearnedLagrangian(LagrangianController):
         return {"optimizer": self.optimizer.state_dict()}
 
     def set_extra_state(self, state) -> None:
-        self.optimizer.load_state_dict(state["optimizer"])
+        # Adam's load_state_dict keeps the given tensors when dtype and device match: copy, so
+        # that loading from another live controller does not share its moments.
+        self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
 
     def extra_repr(self) -> str:
         lr = self.optimizer.param_groups[0]["lr"]

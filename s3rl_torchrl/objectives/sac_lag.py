@@ -92,24 +92,54 @@ class _BatchedMLP:
             return None
         return cls(module.in_keys, layers)
 
+    def _rest(self, x: Tensor, params: TensorDictBase, batch_shape) -> Tensor:
+        """The layers after the first linear one: ``[N, M, H] -> [N, *batch]``."""
+        for layer in self.layers[1:]:
+            if layer[0] == "act":
+                # In place where autograd allows it (no op before ReLU saves its output): fewer
+                # [N, batch, width] temporaries, which measurably cost page faults on CPU.
+                x = torch.relu_(x) if type(layer[1]) is nn.ReLU else layer[1](x)
+            else:
+                weight, bias = params.get(layer[1]), params.get(layer[2])
+                x = torch.baddbmm(bias.unsqueeze(-2), x, weight.transpose(-1, -2))
+        return x.squeeze(-1).reshape(x.shape[0], *batch_shape)
+
     def __call__(self, td: TensorDictBase, params: TensorDictBase) -> Tensor:
         """Values ``[N, *batch]`` of the ``N`` critics whose parameters are stacked in ``params``."""
         x = torch.cat([td.get(key) for key in self.in_keys], -1)
         batch_shape = x.shape[:-1]
-        x = x.reshape(-1, x.shape[-1])
-        first = True
-        for layer in self.layers:
-            if layer[0] == "act":
-                x = layer[1](x)
-                continue
-            weight, bias = params.get(layer[1]), params.get(layer[2])
-            if first:
-                # The input is shared by all critics: broadcast [B, F] @ [N, F, out].
-                x = torch.matmul(x, weight.transpose(-1, -2)) + bias.unsqueeze(-2)
-                first = False
-            else:
-                x = torch.baddbmm(bias.unsqueeze(-2), x, weight.transpose(-1, -2))
-        return x.squeeze(-1).reshape(x.shape[0], *batch_shape)
+        weight, bias = params.get(self.layers[0][1]), params.get(self.layers[0][2])
+        # The input is shared by all critics: broadcast [M, F] @ [N, F, H].
+        x = torch.matmul(x.reshape(-1, x.shape[-1]), weight.transpose(-1, -2))
+        return self._rest(x.add_(bias.unsqueeze(-2)), params, batch_shape)
+
+    def first_layer_term(
+        self, td: TensorDictBase, params: TensorDictBase, keys, *, bias: bool
+    ) -> Tensor:
+        """``sum_k x_k W1[:, cols_k]^T`` (+ ``b1``) over the inputs ``keys``: ``[N, M, H]``.
+
+        The first layer of ``Q(concat(x_1, ..., x_K))`` is a sum of per-input terms; computing
+        them apart lets the actor loss (a) reuse the observation term of the critic loss and (b)
+        backpropagate into the action columns only instead of the whole input.
+        """
+        weight = params.get(self.layers[0][1])
+        out, start = None, 0
+        for key in self.in_keys:
+            x = td.get(key)
+            width = x.shape[-1]
+            if key in keys:
+                cols = weight[..., start : start + width].transpose(-1, -2)
+                term = torch.matmul(x.reshape(-1, width), cols)
+                out = term if out is None else out + term
+            start += width
+        if bias:
+            b1 = params.get(self.layers[0][2]).unsqueeze(-2)
+            out = b1 if out is None else out + b1
+        return out
+
+    def from_first_layer(self, h: Tensor, params: TensorDictBase, batch_shape) -> Tensor:
+        """Values ``[N, *batch]`` from the pre-activation of the first layer ``[N, M, H]``."""
+        return self._rest(h, params, batch_shape)
 
 
 class SACLagLoss(SACLoss):
@@ -456,6 +486,40 @@ class SACLagLoss(SACLoss):
             values = self._vmap_qnetworkN0(td, params).get(value_key).squeeze(-1)
         return values[:n], values[n:].unflatten(0, (m, n))
 
+    def _split_keys(self) -> tuple | None:
+        """Critic inputs other than the action (``None``: the split path does not apply)."""
+        if self._critic_eval != "batched_mlp":
+            return None
+        action = self.tensor_keys.action
+        if action not in self._batched_mlp.in_keys:
+            return None
+        return tuple(key for key in self._batched_mlp.in_keys if key != action)
+
+    def _stacked_params(self, detached: bool) -> TensorDictBase:
+        reward = self._cached_detached_qvalue_params if detached else self.qvalue_network_params
+        if not self.num_costs:
+            return reward
+        cost = self.cost_qvalue_network_params
+        return torch.cat([reward, cost.detach() if detached else cost], 0)
+
+    def _critics_split(
+        self, td: TensorDictBase, params: TensorDictBase, shared: Tensor | None
+    ) -> tuple[Tensor, Tensor | None, Tensor]:
+        """Batched-MLP critics with the first layer split into non-action and action terms.
+
+        ``shared`` is the non-action term (bias included); it is computed when ``None``.
+        Returns reward ``[N, *B]``, cost ``[m, N, *B]`` values and the shared term.
+        """
+        mlp = self._batched_mlp
+        if shared is None:
+            shared = mlp.first_layer_term(td, params, self._split_keys(), bias=True)
+        action_term = mlp.first_layer_term(td, params, (self.tensor_keys.action,), bias=False)
+        values = mlp.from_first_layer(action_term.add_(shared), params, td.batch_size)
+        n, m = self.num_qvalue_nets, self.num_costs
+        if not m:
+            return values, None, shared
+        return values[:n], values[n:].unflatten(0, (m, n)), shared
+
     def _critic_input(self, tensordict: TensorDictBase) -> TensorDictBase:
         keys = list(self.qvalue_network.in_keys)
         if self.num_costs and self._critic_eval == "vmap":
@@ -552,11 +616,17 @@ class SACLagLoss(SACLoss):
         """Reward-critic loss; the cost-critic loss is in the metadata (``loss_cost_qvalue``)."""
         weights = self._maybe_get_priority_weight(tensordict)
         target_reward, target_cost = self.compute_targets(tensordict)
-        pred_reward, pred_cost = self._critics(
-            self._critic_input(tensordict),
-            self.qvalue_network_params,
-            self.cost_qvalue_network_params if self.num_costs else None,
-        )
+        shared = None
+        if self._split_keys() is not None:
+            pred_reward, pred_cost, shared = self._critics_split(
+                tensordict, self._stacked_params(detached=False), None
+            )
+        else:
+            pred_reward, pred_cost = self._critics(
+                self._critic_input(tensordict),
+                self.qvalue_network_params,
+                self.cost_qvalue_network_params if self.num_costs else None,
+            )
         td_error = (pred_reward - target_reward).abs()
         loss_qvalue = distance_loss(
             pred_reward, target_reward.expand_as(pred_reward), loss_function=self.loss_function
@@ -570,7 +640,11 @@ class SACLagLoss(SACLoss):
             loss_cost = self._reduce_loss(loss_cost, tensordict=tensordict, weights=weights)
         else:
             loss_cost = torch.zeros_like(loss_qvalue)
-        metadata = {"td_error": td_error.detach().max(0)[0], "loss_cost_qvalue": loss_cost}
+        metadata = {
+            "td_error": td_error.detach().max(0)[0],
+            "loss_cost_qvalue": loss_cost,
+            "first_layer_shared": shared,
+        }
         return loss_qvalue, metadata
 
     def critic_loss(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -594,6 +668,11 @@ class SACLagLoss(SACLoss):
 
     def actor_loss(self, tensordict: TensorDictBase) -> tuple[Tensor, dict[str, Tensor]]:
         """Lagrangian actor loss; metadata: ``log_prob`` (detached), ``reward_q``, ``cost_q``."""
+        return self._actor_loss(tensordict, None)
+
+    def _actor_loss(
+        self, tensordict: TensorDictBase, shared: Tensor | None
+    ) -> tuple[Tensor, dict[str, Tensor]]:
         weights = self._maybe_get_priority_weight(tensordict)
         with (
             set_exploration_type(ExplorationType.RANDOM),
@@ -603,12 +682,18 @@ class SACLagLoss(SACLoss):
             action, log_prob = compute_rsample_log_prob(dist)
         td_q = self._critic_input(tensordict)
         td_q.set(self.tensor_keys.action, action)
-        # Detached critic parameters: the actor loss must not move the critics.
-        q_reward, q_cost = self._critics(
-            td_q,
-            self._cached_detached_qvalue_params,
-            self._cached_detached_cost_qvalue_params if self.num_costs else None,
-        )
+        # Detached critic parameters (and shared term): the actor loss must not move the critics.
+        if self._split_keys() is not None:
+            shared = None if shared is None else shared.detach()
+            q_reward, q_cost, _ = self._critics_split(
+                td_q, self._stacked_params(detached=True), shared
+            )
+        else:
+            q_reward, q_cost = self._critics(
+                td_q,
+                self._cached_detached_qvalue_params,
+                self._cached_detached_cost_qvalue_params if self.num_costs else None,
+            )
         min_q_reward = q_reward.min(0)[0]
         if log_prob.shape != min_q_reward.shape:
             raise RuntimeError(
@@ -633,7 +718,10 @@ class SACLagLoss(SACLoss):
     @dispatch
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
         loss_qvalue, value_metadata = self.qvalue_v2_loss(tensordict)
-        loss_actor, metadata_actor = self.actor_loss(tensordict)
+        # Same critic parameters in both losses here: reuse the critic loss's observation term.
+        loss_actor, metadata_actor = self._actor_loss(
+            tensordict, value_metadata["first_layer_shared"]
+        )
         weights = self._maybe_get_priority_weight(tensordict)
         loss_alpha = self._reduce_loss(
             self._alpha_loss(log_prob=metadata_actor["log_prob"]),
@@ -692,7 +780,11 @@ def make_sac_lag_optimizers(
     """Adam optimisers over the loss's parameter groups (defaults: the paper's learning rates).
 
     Works for ``SACLagLoss`` and torchrl's ``SACLoss``. ``alpha`` is ``None`` with a fixed alpha.
+    ``adam_kwargs`` go to every ``torch.optim.Adam``; without ``fused``/``foreach`` the fused
+    implementation is used (measured ~4x faster than the default per-tensor loop on CPU).
     """
+    if "fused" not in adam_kwargs and "foreach" not in adam_kwargs:
+        adam_kwargs["fused"] = True
     for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr), ("alpha_lr", alpha_lr)):
         if not lr > 0:
             raise ValueError(f"{name} must be > 0, got {lr!r}.")

@@ -196,6 +196,7 @@ class EvalConfig:
     episodes: int = 2  # per epoch
     final_episodes: int = 10
     max_steps: int = 1000
+    random_baseline: bool = True  # add a random-policy row to the final table
 
     def check(self, path: str) -> None:
         _check_range(f"{path}.num_envs", self.num_envs, 1)
@@ -230,7 +231,9 @@ class TrainConfig:
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     seed: int = 10
     device: str = "cpu"
-    threads: int = 0  # torch intra-op threads; 0 keeps torch's default
+    # torch intra-op threads; 0 keeps torch's default. One is the robust choice on 2 shared
+    # cores: two threads stall whenever another process runs (docs/benchmarks.md).
+    threads: int = 1
     compile: bool = False
     save_interval: int = 4  # epochs between checkpoints (and one at the end)
     resume: str | None = None  # a run directory to continue

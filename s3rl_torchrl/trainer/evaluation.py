@@ -107,6 +107,16 @@ def evaluate(
     )
 
 
+class RandomPolicy:
+    """Uniform random actions from the env's action spec: the reference a trained policy beats."""
+
+    def __init__(self, env: EnvBase):
+        self.env = env
+
+    def __call__(self, tensordict: TensorDictBase) -> TensorDictBase:
+        return self.env.rand_action(tensordict)
+
+
 def format_table(rows: dict[str, EvalResult], title: str = "Final evaluation") -> str:
     """A Markdown table of evaluation results, one row per label."""
     lines = [

@@ -49,20 +49,10 @@ from s3rl_torchrl.trainer.checkpoint import (
     save_checkpoint,
 )
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
-from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
+from s3rl_torchrl.trainer.evaluation import EvalResult, RandomPolicy, evaluate, format_table
 from s3rl_torchrl.trainer.metrics import RunMetrics, make_torchrl_logger
 
 FINAL_EVAL_FILE = "final_eval.json"
-LOSS_DIAGNOSTICS = (
-    "loss_actor",
-    "loss_qvalue",
-    "loss_cost_qvalue",
-    "loss_alpha",
-    "alpha",
-    "entropy",
-    "reward_q",
-    "cost_q",
-)
 CONTRASTIVE_DIAGNOSTICS = (
     "loss_infonce",
     "pos_similarity",
@@ -171,6 +161,10 @@ class Trainer:
         self.nstep = (
             make_nstep_transform(cfg.algo.n_step, cfg.algo.gamma) if cfg.algo.n_step > 1 else None
         )
+        self._optimizers = [o for o in self.agent.optimizers if o is not None]
+        # torch.compile of the whole update (forward, backward, optimiser steps); the first
+        # steps pay the compile time (docs/benchmarks.md says when it pays off).
+        self._update_step = torch.compile(self._update) if cfg.compile else self._update
         self.counters = Counters()
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
@@ -262,8 +256,17 @@ class Trainer:
         self._train_episodes.extend(zip(rewards.tolist(), costs.tolist()))
         self.counters.episodes += int(done.sum())
         if self.agent.lagrangian is not None:
-            self.agent.loss.lagrangian = self.agent.lagrangian.update(costs.mean())
+            mean_cost = costs.mean()
+            lagrangian = self.agent.lagrangian.update(mean_cost)
+            self.agent.loss.lagrangian = lagrangian
             self.counters.lagrangian_updates += 1
+            self.metrics.log_scalars(
+                {
+                    "lagrangian/episode_cost": float(mean_cost),
+                    "lagrangian/value": float(lagrangian.sum()),
+                },
+                step=self.counters.frames,
+            )
 
     def _updates_owed(self, frames: int) -> float:
         # No learning from the uniform-random warm-up frames alone (FSRL starts after them).
@@ -273,21 +276,25 @@ class Trainer:
             return 0.0
         return self.cfg.algo.update_per_step * frames
 
-    def _gradient_step(self) -> None:
+    def _update(self, batch: TensorDictBase) -> TensorDictBase:
+        """One gradient step on a batch: all losses of one forward, then every optimiser."""
         agent = self.agent
-        batch = self.replay_buffer.sample()
         losses = agent.loss(batch)
         total = sum(v for k, v in losses.items() if k.startswith("loss_"))
-        optimizers = [o for o in agent.optimizers if o is not None]
-        for optimizer in optimizers:
+        for optimizer in self._optimizers:
             optimizer.zero_grad(set_to_none=True)
         total.backward()
-        for optimizer in optimizers:
+        for optimizer in self._optimizers:
             optimizer.step()
         agent.target_updater.step()
+        return losses.detach()
+
+    def _gradient_step(self) -> None:
+        agent = self.agent
+        losses = self._update_step(self.replay_buffer.sample())
         self.counters.grad_steps += 1
         self.counters.pending_updates -= 1.0
-        self._last_losses = {k: v.detach() for k, v in losses.items()}
+        self._last_losses = dict(losses.items())
 
         phase = agent.contrastive
         interval = self.cfg.algo.contrastive_cfg.update_interval
@@ -335,7 +342,9 @@ class Trainer:
             "eval/safe_occupancy": result.safe_occupancy,
             "eval/seconds": eval_seconds,
         }
-        for key in LOSS_DIAGNOSTICS:
+        for key in self.agent.loss.out_keys:
+            if key == "lagrangian":  # logged above as the sum over costs
+                continue
             value = self._last_losses.get(key)
             row[f"train/{key}"] = float(value.float().mean()) if value is not None else nan
         for key in CONTRASTIVE_DIAGNOSTICS:
@@ -353,12 +362,16 @@ class Trainer:
 
     def _final_evaluation(self) -> EvalResult:
         cfg = self.cfg
-        result = evaluate(
-            self.test_env, self.agent.actor, cfg.eval.final_episodes, cfg.eval.max_steps
-        )
+        episodes, max_steps = cfg.eval.final_episodes, cfg.eval.max_steps
+        result = evaluate(self.test_env, self.agent.actor, episodes, max_steps)
         result.save(self.run_dir / FINAL_EVAL_FILE)
-        label = f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}"
-        print("\n" + format_table({label: result}) + f"\n\nRun directory: {self.run_dir}\n")
+        rows = {f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}": result}
+        if cfg.eval.random_baseline:
+            rows["random policy (reference)"] = evaluate(
+                self.test_env, RandomPolicy(self.test_env), episodes, max_steps
+            )
+        title = f"Final evaluation: {episodes} deterministic episodes"
+        print("\n" + format_table(rows, title) + f"\n\nRun directory: {self.run_dir}\n")
         return result
 
     def _interrupted(self, progress) -> TrainResult:

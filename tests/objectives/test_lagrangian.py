@@ -1,0 +1,155 @@
+"""Lagrangian controllers against hand-computed sequences."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from s3rl_torchrl.objectives import LearnedLagrangian, PIDLagrangian
+
+
+def run(controller, costs):
+    return [controller.update(cost).tolist() for cost in costs]
+
+
+def test_pid_fsrl_form_by_hand():
+    pid = PIDLagrangian(kp=0.05, ki=0.0005, kd=0.1, cost_limit=10.0)
+    assert pid.lagrangian.tolist() == [0.0]
+    # e = J - 10; I = max(0, I + e); D = max(0, e - e_prev), e_prev starting at 0
+    #  J=12: e=2,  I=2,  D=2   -> 0.1 + 0.001 + 0.2        = 0.301
+    #  J=15: e=5,  I=7,  D=3   -> 0.25 + 0.0035 + 0.3      = 0.5535
+    #  J=8:  e=-2, I=5,  D=0   -> -0.1 + 0.0025            < 0 -> 0
+    #  J=3:  e=-7, I=0,  D=0   -> -0.35                    < 0 -> 0
+    #  J=20: e=10, I=10, D=17  -> 0.5 + 0.005 + 1.7        = 2.205
+    #  J=10: e=0,  I=10, D=0   -> 0.005
+    out = run(pid, [12.0, 15.0, 8.0, 3.0, 20.0, 10.0])
+    expected = [0.301, 0.5535, 0.0, 0.0, 2.205, 0.005]
+    assert [o[0] for o in out] == pytest.approx(expected, abs=1e-12)
+    assert pid.lagrangian.tolist() == pytest.approx([0.005], abs=1e-12)
+    assert int(pid.num_updates) == 6
+
+
+def test_pid_rlpyt_options_by_hand():
+    pid = PIDLagrangian(
+        kp=0.1,
+        ki=0.01,
+        kd=0.2,
+        cost_limit=5.0,
+        ki_inside_integral=True,
+        error_ema=0.5,
+        cost_ema=0.5,
+        derivative_delay=2,
+        derivative_history_init="zero",
+        penalty_max=1.0,
+    )
+    # P = .5 P + .5 e; I = max(0, I + .01 e); C = .5 C + .5 J; D = max(0, C - C two updates ago)
+    #  J=9:  e=4,  P=2,    I=.04, C=4.5,    D=4.5-0     -> .2+.04+.9   = 1.14 -> cap 1.0
+    #  J=13: e=8,  P=5,    I=.12, C=8.75,   D=8.75-0    -> .5+.12+1.75 = 2.37 -> cap 1.0
+    #  J=1:  e=-4, P=.5,   I=.08, C=4.875,  D=4.875-4.5 -> .05+.08+.075 = .205
+    #  J=5:  e=0,  P=.25,  I=.08, C=4.9375, D=0 (< 8.75) -> .025+.08   = .105
+    out = run(pid, [9.0, 13.0, 1.0, 5.0])
+    assert [o[0] for o in out] == pytest.approx([1.0, 1.0, 0.205, 0.105], abs=1e-12)
+
+
+def test_pid_two_costs_have_their_own_state():
+    pid = PIDLagrangian(cost_limit=[10.0, 2.0])
+    # cost 0 as in the FSRL test; cost 1: J=1: e=-1 -> 0; J=4: e=2, I=2, D=2-(-1)=3 -> 0.401
+    out = run(pid, [[12.0, 1.0], [15.0, 4.0]])
+    assert out[0] == pytest.approx([0.301, 0.0], abs=1e-12)
+    assert out[1] == pytest.approx([0.5535, 0.401], abs=1e-12)
+
+
+def test_pid_scalar_limit_broadcasts_to_num_costs():
+    pid = PIDLagrangian(cost_limit=10.0, num_costs=2)
+    assert pid.cost_limit.tolist() == [10.0, 10.0]
+    assert pid.update(torch.tensor([12.0, 8.0])).tolist() == pytest.approx([0.301, 0.0])
+
+
+def test_pid_lagrangian_init_seeds_the_integral():
+    pid = PIDLagrangian(cost_limit=10.0, lagrangian_init=0.2)
+    assert pid.lagrangian.tolist() == pytest.approx([0.2])
+    # e = 0: only the integral term remains, ki * (0.2 / ki) = 0.2
+    assert pid.update(10.0).tolist() == pytest.approx([0.2], abs=1e-12)
+
+
+def test_pid_state_dict_round_trip_continues_identically():
+    options = {"error_ema": 0.3, "cost_ema": 0.6, "derivative_delay": 3, "ki_inside_integral": True}
+    a = PIDLagrangian(cost_limit=[5.0, 1.0], **options)
+    run(a, [[6.0, 0.0], [9.0, 3.0], [2.0, 2.0]])
+    b = PIDLagrangian(cost_limit=[5.0, 1.0], **options)
+    b.load_state_dict(a.state_dict())
+    assert torch.equal(b.lagrangian, a.lagrangian)
+    later = [[7.0, 1.0], [1.0, 5.0], [8.0, 0.5]]
+    assert run(b, later) == run(a, later)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"cost_limit": -1.0}, "cost_limit"),
+        ({"cost_limit": float("inf")}, "cost_limit"),
+        ({"cost_limit": [1.0, 2.0], "num_costs": 3}, "one per cost"),
+        ({"kp": -0.1}, "kp"),
+        ({"error_ema": 1.0}, "error_ema"),
+        ({"derivative_delay": 0}, "derivative_delay"),
+        ({"derivative_history_init": "last"}, "limit, zero"),
+        ({"penalty_max": 0.0}, "penalty_max"),
+        ({"ki": 0.0, "lagrangian_init": 0.5}, "ki > 0"),
+    ],
+)
+def test_pid_bad_arguments(kwargs, match):
+    kwargs = {"cost_limit": 10.0, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        PIDLagrangian(**kwargs)
+
+
+def test_update_rejects_wrong_length_and_nan():
+    pid = PIDLagrangian(cost_limit=[1.0, 2.0])
+    with pytest.raises(ValueError, match="2 cost limit"):
+        pid.update(3.0)
+    with pytest.raises(ValueError, match="finite"):
+        pid.update([float("nan"), 1.0])
+    assert int(pid.num_updates) == 0
+
+
+def test_learned_lagrangian_adam_steps_by_hand():
+    lag = LearnedLagrangian(cost_limit=10.0, lr=0.1, lagrangian_init=0.5)
+    # Loss -lambda (J - d): gradient -(J - d). Adam's first steps with a constant gradient move
+    # by exactly lr (m_hat / sqrt(v_hat) = sign(g)), up the constraint violation.
+    assert lag.update(12.0).tolist() == pytest.approx([0.6], abs=1e-6)
+    assert lag.update(12.0).tolist() == pytest.approx([0.7], abs=1e-6)
+    # Third step, gradient +10 (J = 0): Adam's update written out.
+    b1, b2 = 0.9, 0.999
+    m = v = 0.0
+    for g in (-2.0, -2.0, 10.0):
+        m, v = b1 * m + (1 - b1) * g, b2 * v + (1 - b2) * g * g
+    step = 0.1 * (m / (1 - b1**3)) / (math.sqrt(v / (1 - b2**3)) + 1e-8)
+    assert lag.update(0.0).tolist() == pytest.approx([0.7 - step], abs=1e-6)
+
+
+def test_learned_lagrangian_clamps_at_zero_and_upper_bound():
+    lag = LearnedLagrangian(cost_limit=[10.0, 0.0], lr=0.5, lagrangian_init=0.3, upper_bound=1.0)
+    for _ in range(5):
+        out = lag.update([0.0, 50.0])
+    assert out.tolist() == [0.0, 1.0]
+    assert bool((lag.multiplier >= 0).all())
+
+
+def test_learned_lagrangian_state_dict_includes_adam_state():
+    a = LearnedLagrangian(cost_limit=[3.0, 4.0], lr=0.05)
+    run(a, [[5.0, 1.0], [4.0, 6.0]])
+    b = LearnedLagrangian(cost_limit=[3.0, 4.0], lr=0.05)
+    b.load_state_dict(a.state_dict())
+    later = [[1.0, 9.0], [7.0, 2.0], [3.5, 4.5]]
+    assert run(b, later) == run(a, later)
+
+
+def test_learned_lagrangian_bad_arguments():
+    with pytest.raises(ValueError, match="lr"):
+        LearnedLagrangian(cost_limit=1.0, lr=0.0)
+    with pytest.raises(ValueError, match="lagrangian_init"):
+        LearnedLagrangian(cost_limit=1.0, lagrangian_init=-1.0)
+    with pytest.raises(ValueError, match="cost_limit"):
+        LearnedLagrangian(cost_limit=-2.0)
