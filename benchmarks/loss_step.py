@@ -1,24 +1,30 @@
 """Milliseconds per full SAC / SAC-Lagrangian gradient step, eager and ``torch.compile``d.
 
-    python benchmarks/loss_step.py [--steps 50] [--rounds 7] [--threads 2] \
+    python benchmarks/loss_step.py [--steps 20] [--rounds 9] [--threads 1] \
         [--envs halfcheetah humanoid] [--modes eager compile] \
         [--out benchmarks/results/loss_step.json]
 
-One step = loss forward on a batch of 256, backward of the summed ``loss_*`` entries, one Adam
-step each for actor, critics and alpha (paper learning rates), and ``SoftUpdate(tau=0.05)``.
-Actor: ``build_s3rl_actor`` (128x128); critics: ``build_qvalue_network`` (128x128), a double
-reward critic, and for SAC-Lag one double cost critic (one cost). Variants:
+Batch 256; actor ``build_s3rl_actor`` (128x128); critics ``build_qvalue_network`` (128x128): a
+double reward critic and, for SAC-Lag, one double cost critic (one cost, lambda = 0.3). Adam
+optimisers from ``make_sac_lag_optimizers`` (paper learning rates, fused Adam) for both losses,
+``SoftUpdate(tau=0.05)``. Two ways to take one full step (critics, actor, alpha, targets):
 
-- ``sac``: torchrl ``SACLoss`` (loss_function="l2", alpha_init=0.005, like SACLagLoss);
-- ``sac_lag``: ``SACLagLoss`` as built by default here (``critic_eval="batched_mlp"``: all
-  critics in one chain of batched matmuls);
-- ``sac_lag_fused_vmap``: ``critic_eval="fused_vmap"`` (reward and cost critics in one vmap);
-- ``sac_lag_vmap``: ``critic_eval="vmap"`` (one vmap for the reward, one for the cost critics).
+- joint (torchrl's usual loop): ``loss(batch)``, one backward of the summed ``loss_*`` entries,
+  the three optimiser steps, the soft update;
+- ``*_fsrl``: FSRL's order, critic loss -> critic step -> actor loss (with the updated critics)
+  -> actor step -> alpha step -> soft update (:func:`s3rl_torchrl.objectives.sac_lag_update`).
 
-Variants are timed in interleaved rounds (each round runs every variant for ``--steps`` steps)
-so that load from other processes hits all of them alike; the reported time is the median over
-rounds. ``compile`` wraps the loss module in ``torch.compile`` (default mode); its compile time
-is the wall time of the first three steps minus three median steps.
+Variants: ``sac`` / ``sac_fsrl`` (torchrl ``SACLoss``, loss_function="l2", alpha_init=0.005),
+``sac_lag`` / ``sac_lag_fsrl`` (``SACLagLoss`` as built by default: ``critic_eval="batched_mlp"``),
+and, eager only, ``sac_lag_fused_vmap`` and ``sac_lag_vmap`` (the other ``critic_eval`` modes).
+
+Variants of one (env, mode) run in one fresh process, timed in interleaved rounds (each round
+runs every variant for ``--steps`` steps) so that load from other processes hits all alike; the
+reported time is the median over rounds, as wall and as process CPU time (with one thread the
+CPU time leaves out the time other processes hold the core). ``compile`` wraps the loss module
+(joint) or its two halves (fsrl) in ``torch.compile`` (default mode). Compile time: each variant
+alone in a fresh process with inductor's on-disk caches off, wall time of the first three steps
+minus three steady steps.
 """
 
 from __future__ import annotations
@@ -38,11 +44,12 @@ from torchrl.data import Bounded
 from torchrl.objectives import SACLoss, SoftUpdate
 
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network, build_s3rl_actor
-from s3rl_torchrl.objectives import SACLagLoss, make_sac_lag_optimizers
+from s3rl_torchrl.objectives import SACLagLoss, make_sac_lag_optimizers, sac_lag_update
 
 ENVS = {"halfcheetah": (17, 6), "humanoid": (376, 17)}
-VARIANTS = ("sac", "sac_lag", "sac_lag_fused_vmap", "sac_lag_vmap")
-CRITIC_EVAL = {"sac_lag": "batched_mlp", "sac_lag_fused_vmap": "fused_vmap", "sac_lag_vmap": "vmap"}
+VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl", "sac_lag_fused_vmap", "sac_lag_vmap")
+COMPILE_VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl")
+CRITIC_EVAL = {"sac_lag_fused_vmap": "fused_vmap", "sac_lag_vmap": "vmap"}
 BATCH = 256
 HIDDEN = (128, 128)
 
@@ -70,34 +77,67 @@ def make_loss(variant: str, obs_dim: int, act_dim: int):
     spec = Bounded(-torch.ones(act_dim), torch.ones(act_dim), (act_dim,))
     actor = build_s3rl_actor(obs_dim, spec, HIDDEN)
     critics = [build_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
-    if variant == "sac":
-        loss = SACLoss(actor, critics, loss_function="l2", alpha_init=0.005)
-    else:
+    if variant.startswith("sac_lag"):
         costs = [build_cost_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
-        loss = SACLagLoss(actor, critics, costs, num_costs=1, critic_eval=CRITIC_EVAL[variant])
+        mode = CRITIC_EVAL.get(variant, "auto")
+        loss = SACLagLoss(actor, critics, costs, num_costs=1, critic_eval=mode)
         loss.lagrangian = 0.3
+    else:
+        loss = SACLoss(actor, critics, loss_function="l2", alpha_init=0.005)
     loss.make_value_estimator(gamma=0.99)
     return loss
 
 
 class Stepper:
-    """One full gradient step of one loss; eager or with the loss forward compiled."""
+    """One full gradient step of one variant, eager or compiled."""
 
     def __init__(self, variant: str, obs_dim: int, act_dim: int, compiled: bool):
         torch.manual_seed(0)
-        self.loss = make_loss(variant, obs_dim, act_dim)
-        self.optimizers = [o for o in make_sac_lag_optimizers(self.loss) if o is not None]
-        self.updater = SoftUpdate(self.loss, tau=0.05)
-        self.forward = torch.compile(self.loss) if compiled else self.loss
+        self.loss = loss = make_loss(variant, obs_dim, act_dim)
+        self.optimizers = make_sac_lag_optimizers(loss)
+        self.updater = SoftUpdate(loss, tau=0.05)
         self.batch = make_batch(obs_dim, act_dim)
+        wrap = torch.compile if compiled else (lambda f: f)
+        if not variant.endswith("_fsrl"):
+            self.forward = wrap(loss)
+            self.step = self.joint_step
+        elif isinstance(loss, SACLagLoss):
+            self.critic_loss, self.actor_loss = wrap(loss.critic_loss), wrap(loss.actor_loss)
+            self.step = self.sac_lag_fsrl_step
+        else:
+            self.critic_loss, self.actor_loss = wrap(loss.qvalue_v2_loss), wrap(loss.actor_loss)
+            self.step = self.sac_fsrl_step
 
-    def step(self) -> None:
+    def joint_step(self) -> None:
         out = self.forward(self.batch)
         total = sum(value for key, value in out.items() if key.startswith("loss_"))
         total.backward()
         for optimizer in self.optimizers:
             optimizer.step()
             optimizer.zero_grad(set_to_none=True)
+        self.updater.step()
+
+    def sac_lag_fsrl_step(self) -> None:
+        sac_lag_update(
+            self.loss, self.batch, self.optimizers, self.updater,
+            critic_loss=self.critic_loss, actor_loss=self.actor_loss,
+        )
+
+    def sac_fsrl_step(self) -> None:
+        # The same order with torchrl's SACLoss pieces.
+        opt = self.optimizers
+        loss_qvalue, _ = self.critic_loss(self.batch)
+        opt.critic.zero_grad(set_to_none=True)
+        loss_qvalue.backward()
+        opt.critic.step()
+        loss_actor, metadata = self.actor_loss(self.batch)
+        opt.actor.zero_grad(set_to_none=True)
+        loss_actor.backward()
+        opt.actor.step()
+        loss_alpha = self.loss.alpha_loss(metadata["log_prob"]).mean()
+        opt.alpha.zero_grad(set_to_none=True)
+        loss_alpha.backward()
+        opt.alpha.step()
         self.updater.step()
 
 
@@ -113,14 +153,10 @@ def timed(fn, n: int) -> tuple[float, float]:
 def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
     obs_dim, act_dim = ENVS[env]
     compiled = mode == "compile"
-    steppers, warmup_s = {}, {}
+    steppers = {}
     for variant in variants:
         stepper = Stepper(variant, obs_dim, act_dim, compiled)
-        start = time.perf_counter()
-        for _ in range(3):  # the first calls compile (and may recompile once)
-            stepper.step()
-        warmup_s[variant] = time.perf_counter() - start
-        for _ in range(5):
+        for _ in range(8):  # the first calls compile (and recompile once: see docs)
             stepper.step()
         steppers[variant] = stepper
     walls = {variant: [] for variant in variants}
@@ -133,27 +169,43 @@ def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
     result = {}
     for variant in variants:
         wall, cpu = statistics.median(walls[variant]), statistics.median(cpus[variant])
-        entry = {
+        result[variant] = {
             "wall_ms": round(wall, 3),
             "cpu_ms": round(cpu, 3),
             "wall_ms_rounds": [round(x, 3) for x in walls[variant]],
             "cpu_ms_rounds": [round(x, 3) for x in cpus[variant]],
         }
-        if compiled:
-            entry["compile_s"] = round(warmup_s[variant] - 3 * wall / 1e3, 2)
-        result[variant] = entry
-    if "sac" in result:
-        for variant in variants:
-            if variant != "sac":
-                for key in ("wall_ms", "cpu_ms"):
-                    ratio = result[variant][key] / result["sac"][key]
-                    result[variant][f"{key[:-3]}_ratio_to_sac"] = round(ratio, 3)
+    for variant in variants:
+        # Each SAC-Lag variant against SACLoss taking its step the same way.
+        base = "sac_fsrl" if variant.endswith("_fsrl") else "sac"
+        if variant.startswith("sac_lag") and base in result:
+            for key in ("wall_ms", "cpu_ms"):
+                ratio = result[variant][key] / result[base][key]
+                result[variant][f"{key[:-3]}_ratio_to_sac"] = round(ratio, 3)
     return result
 
 
-def _worker(env: str, mode: str, variants, steps: int, rounds: int, threads: int) -> dict:
+def compile_time(env: str, variant: str) -> float:
+    """Cold compile time of one variant: run alone in a fresh process, on-disk caches off."""
+    import torch._functorch.config as functorch_config
+    import torch._inductor.config as inductor_config
+
+    inductor_config.fx_graph_cache = False
+    functorch_config.enable_autograd_cache = False
+    stepper = Stepper(variant, *ENVS[env], compiled=True)
+    start = time.perf_counter()
+    for _ in range(3):
+        stepper.step()
+    first = time.perf_counter() - start
+    for _ in range(3):
+        stepper.step()
+    steady = min(timed(stepper.step, 5)[0] for _ in range(3)) / 1e3
+    return first - 3 * steady
+
+
+def _worker(job: str, threads: int, *args):
     torch.set_num_threads(threads)
-    return bench(env, mode, variants, steps, rounds)
+    return bench(*args) if job == "bench" else compile_time(*args)
 
 
 def main() -> None:
@@ -165,7 +217,7 @@ def main() -> None:
     parser.add_argument("--modes", nargs="*", default=["eager", "compile"], choices=["eager", "compile"])
     parser.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument(
-        "--compile-variants", nargs="*", default=["sac", "sac_lag"], choices=list(VARIANTS),
+        "--compile-variants", nargs="*", default=list(COMPILE_VARIANTS), choices=list(VARIANTS),
         help="variants timed in compile mode",
     )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/loss_step.json"))
@@ -181,8 +233,13 @@ def main() -> None:
             variants = args.variants if mode == "eager" else args.compile_variants
             with ctx.Pool(1) as pool:
                 res = pool.apply(
-                    _worker, (env, mode, variants, args.steps, args.rounds, args.threads)
+                    _worker, ("bench", args.threads, env, mode, variants, args.steps, args.rounds)
                 )
+            if mode == "compile":
+                for variant in variants:
+                    with ctx.Pool(1) as pool:
+                        seconds = pool.apply(_worker, ("compile", args.threads, env, variant))
+                    res[variant]["compile_s"] = round(seconds, 1)
             results.setdefault(env, {})[mode] = res
             for variant, entry in res.items():
                 line = f"{env:12s} {mode:8s} {variant:19s} wall {entry['wall_ms']:7.2f} ms"

@@ -19,4 +19,5 @@ from s3rl_torchrl.objectives.sac_lag import (  # noqa: F401
     SACLagLoss,
     SACLagOptimizers,
     make_sac_lag_optimizers,
+    sac_lag_update,
 )

@@ -149,6 +149,10 @@ class NStepTransform(MultiStepTransform):
     ``t``. Like torchrl's, it must see consecutive batches of the same env copies (a collector's
     output, time last) and holds back the last ``n_steps`` frames of each batch until the next
     ``extend``.
+
+    With ``flatten=True`` (default) the output is flattened to one transition per row, which
+    is what a 1-D replay-buffer storage (``LazyTensorStorage(size)``) holds; torchrl's transform
+    keeps ``[num_envs, time]``, which needs a 2-D storage whose time length matches every batch.
     """
 
     def __init__(
@@ -160,6 +164,7 @@ class NStepTransform(MultiStepTransform):
         done_key: NestedKey = "done",
         keep_keys: Sequence[NestedKey] = ("safe",),
         orig_suffix: str = "_orig",
+        flatten: bool = True,
     ):
         _check_n_gamma(n_steps, gamma)
         super().__init__(
@@ -171,6 +176,7 @@ class NStepTransform(MultiStepTransform):
         )
         self.keep_keys = tuple(keep_keys)
         self.orig_suffix = orig_suffix
+        self.flatten = bool(flatten)
 
     def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase | None:
         if not self._validated:
@@ -187,7 +193,8 @@ class NStepTransform(MultiStepTransform):
             keep_keys=self.keep_keys,
             orig_suffix=self.orig_suffix,
         )
-        return out[..., : -self.n_steps]
+        out = out[..., : -self.n_steps]
+        return out.reshape(-1) if self.flatten else out
 
 
 def make_nstep_transform(
@@ -197,14 +204,16 @@ def make_nstep_transform(
     *,
     reward_key: NestedKey = "reward",
     keep_keys: Sequence[NestedKey] = ("safe",),
+    flatten: bool = True,
 ) -> NStepTransform:
     """The n-step replay-buffer transform :class:`~s3rl_torchrl.objectives.SACLagLoss` expects.
 
     Discounts and sums ``("next", reward_key)`` and ``("next", cost_key)`` over ``n_steps`` with
     ``gamma`` (use the loss's gamma), moves the next observation and the done flags to the end
-    of the window, and writes ``steps_to_next_obs``. Use it as ``ReplayBuffer(...,
-    transform=make_nstep_transform(2, 0.99))`` and ``extend`` with a collector's batches.
+    of the window, and writes ``steps_to_next_obs``. Use it as ``ReplayBuffer(
+    storage=LazyTensorStorage(size), transform=make_nstep_transform(2, 0.99))`` and ``extend``
+    with a collector's batches (``[num_envs, time]``, unflattened: the transform flattens).
     """
     return NStepTransform(
-        n_steps, gamma, reward_keys=(reward_key, cost_key), keep_keys=keep_keys
+        n_steps, gamma, reward_keys=(reward_key, cost_key), keep_keys=keep_keys, flatten=flatten
     )

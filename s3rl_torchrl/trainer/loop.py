@@ -200,7 +200,9 @@ class Trainer:
             # A resumed run first pays what the interrupted one owed for its last batch.
             if not self._finish_batch():
                 return self._interrupted(progress)
-            collector = self._make_collector()
+            # A run resumed after its last batch has nothing left to collect.
+            remaining = cfg.collector.total_frames - c.frames
+            collector = self._make_collector() if remaining > 0 else []
             for batch in collector:
                 c.frames += batch.numel()
                 self._store(batch)
@@ -211,7 +213,8 @@ class Trainer:
                     collector.shutdown()
                     return self._interrupted(progress)
                 progress.set_postfix(self._progress_postfix(), refresh=False)
-            collector.shutdown()
+            if remaining > 0:
+                collector.shutdown()
             final = self._final_evaluation()
             return TrainResult(self.run_dir, "finished", c, final, self.history)
         finally:

@@ -116,6 +116,22 @@ def test_replay_buffer_extend_in_chunks_matches_one_shot():
         assert torch.equal(stored[key], expected[key]), key
 
 
+def test_replay_buffer_with_batched_envs_stores_flat_transitions():
+    data = torch.stack([trajectory(), trajectory(10, (5,), (8,))], 0)  # [2 envs, 10 steps]
+    rb = ReplayBuffer(storage=LazyTensorStorage(50), transform=make_nstep_transform(2, GAMMA))
+    rb.extend(data[:, :6])
+    rb.extend(data[:, 6:])
+    assert len(rb) == 16  # 2 envs x (10 - n) steps, one transition per row
+    expected = nstep_transition(data, 2, GAMMA)
+    # First extend: steps 0-3 of each env; second: steps 4-7.
+    order = [(e, t) for chunk in (range(4), range(4, 8)) for e in range(2) for t in chunk]
+    stored = rb[:]
+    for row, (e, t) in enumerate(order):
+        for key in (("next", "reward"), ("next", "observation"), "steps_to_next_obs",
+                    ("next", "terminated")):
+            assert torch.equal(stored[key][row], expected[key][e, t]), (key, e, t)
+
+
 def test_make_nstep_transform_keys():
     transform = make_nstep_transform(2, 0.99, cost_key="c", reward_key="r", keep_keys=())
     assert isinstance(transform, NStepTransform)

@@ -161,3 +161,12 @@ def test_resume_rejects_a_different_network(tiny_config, tmp_path):
     with pytest.raises(CheckpointError, match="network.actor_hidden"):
         train(other, tmp_path / "x")
     assert (tmp_path / "metrics.csv").read_text() == metrics_before  # nothing lost
+
+
+def test_resuming_a_finished_run_only_evaluates(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    first = train(cfg, tmp_path)
+    cfg.resume = str(tmp_path)
+    again = train(cfg, tmp_path / "ignored")
+    assert again.status == "finished" and _counters(again) == _counters(first)
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200"]
