@@ -18,13 +18,13 @@ Variants: ``sac`` / ``sac_fsrl`` (torchrl ``SACLoss``, loss_function="l2", alpha
 ``sac_lag`` / ``sac_lag_fsrl`` (``SACLagLoss`` as built by default: ``critic_eval="batched_mlp"``),
 and, eager only, ``sac_lag_fused_vmap`` and ``sac_lag_vmap`` (the other ``critic_eval`` modes).
 
-Variants of one (env, mode) run in one fresh process, timed in interleaved rounds (each round
-runs every variant for ``--steps`` steps) so that load from other processes hits all alike; the
-reported time is the median over rounds, as wall and as process CPU time (with one thread the
-CPU time leaves out the time other processes hold the core). ``compile`` wraps the loss module
-(joint) or its two halves (fsrl) in ``torch.compile`` (default mode). Compile time: each variant
-alone in a fresh process with inductor's on-disk caches off, wall time of the first three steps
-minus three steady steps.
+All variants and modes of one env run in one fresh process, timed in interleaved rounds (each
+round runs every configuration for ``--steps`` steps) so that load from other processes hits
+all alike; the reported time is the median over rounds, as wall and as process CPU time (with
+one thread the CPU time leaves out the time other processes hold the core). ``compile`` wraps
+the loss module (joint) or its two halves (fsrl) in ``torch.compile`` (default mode). Compile
+time: each variant alone in a fresh process with inductor's on-disk caches off, wall time of the
+first three steps minus three steady steps. Results: ``docs/objectives.md``.
 """
 
 from __future__ import annotations
@@ -119,8 +119,12 @@ class Stepper:
 
     def sac_lag_fsrl_step(self) -> None:
         sac_lag_update(
-            self.loss, self.batch, self.optimizers, self.updater,
-            critic_loss=self.critic_loss, actor_loss=self.actor_loss,
+            self.loss,
+            self.batch,
+            self.optimizers,
+            self.updater,
+            critic_loss=self.critic_loss,
+            actor_loss=self.actor_loss,
         )
 
     def sac_fsrl_step(self) -> None:
@@ -150,38 +154,41 @@ def timed(fn, n: int) -> tuple[float, float]:
     return (time.perf_counter() - wall) / n * 1e3, (time.process_time() - cpu) / n * 1e3
 
 
-def bench(env: str, mode: str, variants, steps: int, rounds: int) -> dict:
+def bench(env: str, configs, steps: int, rounds: int) -> dict:
+    """Time every ``(variant, mode)`` of ``configs`` in this process, interleaved."""
     obs_dim, act_dim = ENVS[env]
-    compiled = mode == "compile"
     steppers = {}
-    for variant in variants:
-        stepper = Stepper(variant, obs_dim, act_dim, compiled)
+    for variant, mode in configs:
+        stepper = Stepper(variant, obs_dim, act_dim, mode == "compile")
         for _ in range(8):  # the first calls compile (and recompile once: see docs)
             stepper.step()
-        steppers[variant] = stepper
-    walls = {variant: [] for variant in variants}
-    cpus = {variant: [] for variant in variants}
+        steppers[variant, mode] = stepper
+    walls = {config: [] for config in steppers}
+    cpus = {config: [] for config in steppers}
     for _ in range(rounds):
-        for variant in variants:
-            wall, cpu = timed(steppers[variant].step, steps)
-            walls[variant].append(wall)
-            cpus[variant].append(cpu)
+        for config, stepper in steppers.items():
+            wall, cpu = timed(stepper.step, steps)
+            walls[config].append(wall)
+            cpus[config].append(cpu)
     result = {}
-    for variant in variants:
-        wall, cpu = statistics.median(walls[variant]), statistics.median(cpus[variant])
-        result[variant] = {
+    for variant, mode in steppers:
+        wall, cpu = statistics.median(walls[variant, mode]), statistics.median(cpus[variant, mode])
+        result.setdefault(mode, {})[variant] = {
             "wall_ms": round(wall, 3),
             "cpu_ms": round(cpu, 3),
-            "wall_ms_rounds": [round(x, 3) for x in walls[variant]],
-            "cpu_ms_rounds": [round(x, 3) for x in cpus[variant]],
+            "wall_ms_rounds": [round(x, 3) for x in walls[variant, mode]],
+            "cpu_ms_rounds": [round(x, 3) for x in cpus[variant, mode]],
         }
-    for variant in variants:
-        # Each SAC-Lag variant against SACLoss taking its step the same way.
-        base = "sac_fsrl" if variant.endswith("_fsrl") else "sac"
-        if variant.startswith("sac_lag") and base in result:
-            for key in ("wall_ms", "cpu_ms"):
-                ratio = result[variant][key] / result[base][key]
-                result[variant][f"{key[:-3]}_ratio_to_sac"] = round(ratio, 3)
+    for mode, entries in result.items():
+        for variant, entry in entries.items():
+            # Each SAC-Lag variant against SACLoss taking its step the same way.
+            base = "sac_fsrl" if variant.endswith("_fsrl") else "sac"
+            if variant.startswith("sac_lag") and base in entries:
+                for key in ("wall_ms", "cpu_ms"):
+                    entry[f"{key[:-3]}_ratio_to_sac"] = round(entry[key] / entries[base][key], 3)
+            if mode == "compile" and variant in result.get("eager", {}):
+                eager = result["eager"][variant]
+                entry["cpu_speedup_over_eager"] = round(eager["cpu_ms"] / entry["cpu_ms"], 3)
     return result
 
 
@@ -214,10 +221,15 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--envs", nargs="*", default=list(ENVS), choices=list(ENVS))
-    parser.add_argument("--modes", nargs="*", default=["eager", "compile"], choices=["eager", "compile"])
+    parser.add_argument(
+        "--modes", nargs="*", default=["eager", "compile"], choices=["eager", "compile"]
+    )
     parser.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument(
-        "--compile-variants", nargs="*", default=list(COMPILE_VARIANTS), choices=list(VARIANTS),
+        "--compile-variants",
+        nargs="*",
+        default=list(COMPILE_VARIANTS),
+        choices=list(VARIANTS),
         help="variants timed in compile mode",
     )
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/loss_step.json"))
@@ -225,32 +237,40 @@ def main() -> None:
 
     load_before = os.getloadavg()
     results = {}
-    # One fresh process per (env, mode): compiled code and dynamo's caches are per process, so
-    # compile times are not hidden by an earlier configuration and no cache limit is reached.
+    # One fresh process per env; inside it every variant and mode is timed in the same
+    # interleaved rounds (eager and compiled steps of one process compare reliably, across
+    # processes the same step varied by up to ~20% here). Compile times come from one more
+    # fresh process per compiled variant, so no earlier compilation hides them.
     ctx = mp.get_context("spawn")
     for env in args.envs:
-        for mode in args.modes:
-            variants = args.variants if mode == "eager" else args.compile_variants
+        configs = []
+        if "eager" in args.modes:
+            configs += [(variant, "eager") for variant in args.variants]
+        if "compile" in args.modes:
+            configs += [(variant, "compile") for variant in args.compile_variants]
+        with ctx.Pool(1) as pool:
+            res = pool.apply(
+                _worker, ("bench", args.threads, env, configs, args.steps, args.rounds)
+            )
+        for variant in res.get("compile", {}):
             with ctx.Pool(1) as pool:
-                res = pool.apply(
-                    _worker, ("bench", args.threads, env, mode, variants, args.steps, args.rounds)
-                )
-            if mode == "compile":
-                for variant in variants:
-                    with ctx.Pool(1) as pool:
-                        seconds = pool.apply(_worker, ("compile", args.threads, env, variant))
-                    res[variant]["compile_s"] = round(seconds, 1)
-            results.setdefault(env, {})[mode] = res
-            for variant, entry in res.items():
+                seconds = pool.apply(_worker, ("compile", args.threads, env, variant))
+            res["compile"][variant]["compile_s"] = round(seconds, 1)
+        results[env] = res
+        for mode, entries in res.items():
+            for variant, entry in entries.items():
                 line = f"{env:12s} {mode:8s} {variant:19s} wall {entry['wall_ms']:7.2f} ms"
                 line += f"  cpu {entry['cpu_ms']:7.2f} ms"
-                if "wall_ratio_to_sac" in entry:
-                    line += f"  x{entry['wall_ratio_to_sac']:.2f} wall x{entry['cpu_ratio_to_sac']:.2f} cpu"
+                if "cpu_ratio_to_sac" in entry:
+                    line += f"  x{entry['cpu_ratio_to_sac']:.2f} of SAC (cpu)"
+                if "cpu_speedup_over_eager" in entry:
+                    line += f"  x{entry['cpu_speedup_over_eager']:.2f} faster than eager"
                 if "compile_s" in entry:
                     line += f"  compile {entry['compile_s']} s"
                 print(line, flush=True)
     payload = {
-        "command": "python benchmarks/loss_step.py " + " ".join(
+        "command": "python benchmarks/loss_step.py "
+        + " ".join(
             f"--{k.replace('_', '-')} {' '.join(map(str, v)) if isinstance(v, list) else v}"
             for k, v in vars(args).items()
         ),

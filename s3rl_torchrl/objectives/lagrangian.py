@@ -38,11 +38,15 @@ def _as_vector(value, name: str, num: int | None = None) -> Tensor:
         try:
             tensor = torch.as_tensor(value, dtype=torch.float64)
         except (TypeError, ValueError, RuntimeError) as err:
-            raise TypeError(f"{name} must be a number or a sequence of numbers, got {value!r}.") from err
+            raise TypeError(
+                f"{name} must be a number or a sequence of numbers, got {value!r}."
+            ) from err
     if tensor.ndim == 0:
         tensor = tensor.reshape(1) if num is None else tensor.expand(num).clone()
     if tensor.ndim != 1 or tensor.numel() == 0:
-        raise ValueError(f"{name} must be a number or a 1-D sequence, got shape {tuple(tensor.shape)}.")
+        raise ValueError(
+            f"{name} must be a number or a 1-D sequence, got shape {tuple(tensor.shape)}."
+        )
     if num is not None and tensor.numel() != num:
         raise ValueError(f"{name} has {tensor.numel()} entries, expected {num} (one per cost).")
     return tensor
@@ -164,12 +168,16 @@ class PIDLagrangian(LagrangianController):
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
     ):
         super().__init__(cost_limit, num_costs)
-        self.kp, self.ki, self.kd = (_check_gain(n, v) for n, v in (("kp", kp), ("ki", ki), ("kd", kd)))
+        self.kp, self.ki, self.kd = (
+            _check_gain(n, v) for n, v in (("kp", kp), ("ki", ki), ("kd", kd))
+        )
         for name, value in (("error_ema", error_ema), ("cost_ema", cost_ema)):
             if not 0.0 <= float(value) < 1.0:
                 raise ValueError(f"{name} must be in [0, 1), got {value!r}.")
-        if isinstance(derivative_delay, bool) or not isinstance(derivative_delay, int) or (
-            derivative_delay < 1
+        if (
+            isinstance(derivative_delay, bool)
+            or not isinstance(derivative_delay, int)
+            or (derivative_delay < 1)
         ):
             raise ValueError(f"derivative_delay must be an integer >= 1, got {derivative_delay!r}.")
         if derivative_history_init not in _HISTORY_INIT_CHOICES:

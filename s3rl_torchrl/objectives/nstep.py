@@ -92,12 +92,15 @@ def nstep_transition(
     *batch, T = tensordict.batch_size
     done = next_td.get(done_key, None)
     if done is None:
-        raise KeyError(f"nstep_transition needs ('next', {done_key!r}); keys: {list(next_td.keys())}.")
+        raise KeyError(
+            f"nstep_transition needs ('next', {done_key!r}); keys: {list(next_td.keys())}."
+        )
     if done.shape == tensordict.batch_size + (1,):
         done = done.squeeze(-1)
     if done.shape != tensordict.batch_size:
         raise ValueError(
-            f"('next', {done_key!r}) must have shape {tuple(tensordict.batch_size)} (+ a trailing 1), "
+            f"('next', {done_key!r}) must have shape {tuple(tensordict.batch_size)} "
+            "(+ a trailing 1), "
             f"got {tuple(done.shape)}."
         )
     done = done.bool()

@@ -44,8 +44,19 @@ _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
 _CRITIC_EVAL_CHOICES = ("auto", "batched_mlp", "fused_vmap", "vmap")
 # Elementwise activations: applying them to [N, batch, features] equals applying them per net.
 _ELEMENTWISE = (
-    nn.ReLU, nn.ReLU6, nn.LeakyReLU, nn.ELU, nn.SELU, nn.CELU, nn.GELU, nn.SiLU, nn.Mish,
-    nn.Tanh, nn.Sigmoid, nn.Softplus, nn.Identity,
+    nn.ReLU,
+    nn.ReLU6,
+    nn.LeakyReLU,
+    nn.ELU,
+    nn.SELU,
+    nn.CELU,
+    nn.GELU,
+    nn.SiLU,
+    nn.Mish,
+    nn.Tanh,
+    nn.Sigmoid,
+    nn.Softplus,
+    nn.Identity,
 )
 
 
@@ -151,9 +162,7 @@ class _BatchedMLP:
             out = b1 if out is None else out + b1
         return out
 
-    def from_first_layer(
-        self, h: Tensor, parts: Sequence[TensorDictBase], batch_shape
-    ) -> Tensor:
+    def from_first_layer(self, h: Tensor, parts: Sequence[TensorDictBase], batch_shape) -> Tensor:
         """Values ``[N, *batch]`` from the pre-activation of the first layer ``[N, M, H]``."""
         return self._rest(h, parts, batch_shape)
 
@@ -278,7 +287,9 @@ class SACLagLoss(SACLoss):
                 "(unconstrained SAC)."
             )
         if cost_qvalue_network is not None and num_costs == 0:
-            raise ValueError("num_costs=0 means no cost critic, but a cost_qvalue_network was given.")
+            raise ValueError(
+                "num_costs=0 means no cost critic, but a cost_qvalue_network was given."
+            )
         if isinstance(num_qvalue_nets, bool) or not isinstance(num_qvalue_nets, int):
             raise ValueError(f"num_qvalue_nets must be an integer >= 1, got {num_qvalue_nets!r}.")
         if num_qvalue_nets < 1:
@@ -335,9 +346,7 @@ class SACLagLoss(SACLoss):
         self.num_costs = num_costs
         self.entropy_in_cost_target = bool(entropy_in_cost_target)
         self.rescaling = bool(rescaling)
-        self.register_buffer(
-            "lagrangian", torch.zeros(num_costs, device=self.log_alpha.device)
-        )
+        self.register_buffer("lagrangian", torch.zeros(num_costs, device=self.log_alpha.device))
         self.set_lagrangian(lagrangian_init)
 
         if num_costs > 0:
@@ -393,14 +402,12 @@ class SACLagLoss(SACLoss):
                 if choice == "batched_mlp"
                 else "reward and cost critics with the same architecture and input keys"
             )
-            raise ValueError(
-                f"critic_eval={choice!r} needs {need}; use 'auto' or 'vmap'."
-            )
+            raise ValueError(f"critic_eval={choice!r} needs {need}; use 'auto' or 'vmap'.")
         return choice
 
     @property
     def critic_eval(self) -> str:
-        """The critic evaluation actually used: ``"batched_mlp"``, ``"fused_vmap"`` or ``"vmap"``."""
+        """The critic evaluation in use: ``"batched_mlp"``, ``"fused_vmap"`` or ``"vmap"``."""
         return self._critic_eval
 
     def _make_cost_vmap(self) -> None:
@@ -623,9 +630,9 @@ class SACLagLoss(SACLoss):
         }
         steps = tensordict.get(keys.steps_to_next_obs, None)
         if steps is not None:
-            entries[est_keys.steps_to_next_obs] = steps.reshape(
-                *tensordict.batch_size, 1
-            ).expand(shape)
+            entries[est_keys.steps_to_next_obs] = steps.reshape(*tensordict.batch_size, 1).expand(
+                shape
+            )
         td = TensorDict(entries, batch_size=tensordict.batch_size)
         return estimator.value_estimate(td, next_value=next_value)
 
@@ -837,7 +844,9 @@ def sac_lag_update(
     Returns the detached losses and diagnostics (the keys of ``SACLagLoss.forward``).
     """
     if loss.reduction == "none":
-        raise ValueError("sac_lag_update needs scalar losses: build the loss with reduction='mean'.")
+        raise ValueError(
+            "sac_lag_update needs scalar losses: build the loss with reduction='mean'."
+        )
     critic_loss = loss.critic_loss if critic_loss is None else critic_loss
     actor_loss = loss.actor_loss if actor_loss is None else actor_loss
     critic = critic_loss(batch)

@@ -8,6 +8,7 @@ anything, so a bad override fails with the field's name and what it accepts.
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
@@ -20,6 +21,12 @@ ALGO_NAMES = ("s3rl", "sac_lag", "sac", "s3rl_nolag")
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
 ACTIVATIONS = ("relu", "tanh", "elu", "silu")
 LOGGER_BACKENDS = ("csv", "tensorboard", "wandb", "mlflow", "none")
+# backend -> (module it imports, the package extra that installs it)
+LOGGER_PACKAGES = {
+    "tensorboard": ("tensorboard", "tensorboard"),
+    "wandb": ("wandb", "wandb"),
+    "mlflow": ("mlflow", "mlflow"),
+}
 DEVICES = ("cpu", "cuda", "mps")
 
 
@@ -217,6 +224,14 @@ class LoggerConfig:
     def check(self, path: str) -> None:
         _check_choice(f"{path}.backend", self.backend, LOGGER_BACKENDS)
         _check_choice(f"{path}.wandb_mode", self.wandb_mode, ("offline", "online", "disabled"))
+        module, extra = LOGGER_PACKAGES.get(self.backend, (None, None))
+        if module is not None and importlib.util.find_spec(module) is None:
+            _fail(
+                f"{path}.backend",
+                self.backend,
+                f"needs the '{module}' package: pip install -e \".[{extra}]\" "
+                f"(or choose csv or none)",
+            )
 
 
 @dataclass

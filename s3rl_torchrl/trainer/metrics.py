@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,9 @@ def make_torchrl_logger(
     if backend == "mlflow":
         from torchrl.record.loggers.mlflow import MLFlowLogger
 
+        # A file store in the run directory: no server, no database package. MLflow 3 keeps it
+        # behind an opt-in ("maintenance mode") that we take unless the user decided otherwise.
+        os.environ.setdefault("MLFLOW_ALLOW_FILE_STORE", "true")
         return MLFlowLogger(exp_name=exp_name, tracking_uri=(log_dir / "mlruns").resolve().as_uri())
     raise ValueError(
         f"Unknown logger backend {backend!r}; valid are csv, tensorboard, wandb, mlflow, none."

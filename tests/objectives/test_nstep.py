@@ -41,7 +41,18 @@ def test_two_step_windows_by_hand():
     # t:         0    1    2    3    4    5    6    7    8    9
     # window:   0-1  1-2  2-3  3    4-5  5-6  6-7  7    8-9  9 (end of data)
     # t=2 stops at the termination (3), t=6 at the truncation (7).
-    reward = [1 + 2 / 2, 2 + 3 / 2, 3 + 4 / 2, 4, 5 + 6 / 2, 6 + 7 / 2, 7 + 8 / 2, 8, 9 + 10 / 2, 10]
+    reward = [
+        1 + 2 / 2,
+        2 + 3 / 2,
+        3 + 4 / 2,
+        4,
+        5 + 6 / 2,
+        6 + 7 / 2,
+        7 + 8 / 2,
+        8,
+        9 + 10 / 2,
+        10,
+    ]
     steps = [2, 2, 2, 1, 2, 2, 2, 1, 2, 1]
     end = [1, 2, 3, 3, 5, 6, 7, 7, 9, 9]  # step whose next observation is bootstrapped
     assert out["next", "reward"].squeeze(-1).tolist() == reward
@@ -52,7 +63,9 @@ def test_two_step_windows_by_hand():
     truncated = [e == 7 for e in end]
     assert out["next", "terminated"].squeeze(-1).tolist() == terminated
     assert out["next", "truncated"].squeeze(-1).tolist() == truncated
-    assert out["next", "done"].squeeze(-1).tolist() == [a or b for a, b in zip(terminated, truncated)]
+    assert out["next", "done"].squeeze(-1).tolist() == [
+        a or b for a, b in zip(terminated, truncated)
+    ]
     # One-step values kept; labels of step t stay at t; the root is untouched.
     assert out["next", "reward_orig"].squeeze(-1).tolist() == list(range(1, 11))
     assert out["next", "cost_orig"].squeeze(-1).tolist() == [10.0 * r for r in range(1, 11)]
@@ -79,7 +92,16 @@ def test_three_step_windows_by_hand():
     assert out["steps_to_next_obs"].tolist() == steps
     assert out["next", "reward"].squeeze(-1).tolist() == reward
     assert out["next", "terminated"].squeeze(-1).tolist() == [
-        False, True, True, True, False, False, False, False, False, False
+        False,
+        True,
+        True,
+        True,
+        False,
+        False,
+        False,
+        False,
+        False,
+        False,
     ]
 
 
@@ -111,8 +133,14 @@ def test_replay_buffer_extend_in_chunks_matches_one_shot():
     # The transform holds back the last n steps of a batch until their future arrives.
     assert stored["observation"].squeeze(-1).tolist() == list(range(8))
     expected = nstep_transition(data, 2, GAMMA)[:8]
-    for key in (("next", "reward"), ("next", "cost"), ("next", "observation"), "steps_to_next_obs",
-                ("next", "terminated"), ("next", "safe")):
+    for key in (
+        ("next", "reward"),
+        ("next", "cost"),
+        ("next", "observation"),
+        "steps_to_next_obs",
+        ("next", "terminated"),
+        ("next", "safe"),
+    ):
         assert torch.equal(stored[key], expected[key]), key
 
 
@@ -127,8 +155,12 @@ def test_replay_buffer_with_batched_envs_stores_flat_transitions():
     order = [(e, t) for chunk in (range(4), range(4, 8)) for e in range(2) for t in chunk]
     stored = rb[:]
     for row, (e, t) in enumerate(order):
-        for key in (("next", "reward"), ("next", "observation"), "steps_to_next_obs",
-                    ("next", "terminated")):
+        for key in (
+            ("next", "reward"),
+            ("next", "observation"),
+            "steps_to_next_obs",
+            ("next", "terminated"),
+        ):
             assert torch.equal(stored[key][row], expected[key][e, t]), (key, e, t)
 
 

@@ -118,7 +118,10 @@ def test_matches_sacloss_without_cost_critics(loss_function, critic_eval):
     actor, critics = make_actor(), make_critics(2)
     sac = SACLoss(actor, critics, loss_function=loss_function, alpha_init=ALPHA)
     lag = SACLagLoss(
-        copy.deepcopy(actor), critics, loss_function=loss_function, alpha_init=ALPHA,
+        copy.deepcopy(actor),
+        critics,
+        loss_function=loss_function,
+        alpha_init=ALPHA,
         critic_eval=critic_eval,
     )
     assert lag.num_costs == 0 and lag.lagrangian.shape == (0,)
@@ -141,7 +144,10 @@ def test_zero_lagrangian_matches_sacloss_and_still_trains_cost_critics(critic_ev
     actor, critics = make_actor(), make_critics(2)
     sac = SACLoss(actor, critics, loss_function="l2", alpha_init=ALPHA)
     lag = SACLagLoss(
-        copy.deepcopy(actor), critics, make_critics(4, cost=True), num_costs=2,
+        copy.deepcopy(actor),
+        critics,
+        make_critics(4, cost=True),
+        num_costs=2,
         critic_eval=critic_eval,
     )
     assert lag.critic_eval == critic_eval
@@ -252,7 +258,9 @@ def test_critic_losses_two_costs_by_hand():
     q_c = q_values(costs, batch["observation"], batch["action"])
     # FSRL: squared error, mean over the batch, summed over the critics.
     expected_r = sum(((q_r[j] - target_r) ** 2).mean() for j in range(2))
-    expected_c = sum(((q_c[2 * i + j] - target_c[:, i]) ** 2).mean() for i in range(2) for j in range(2))
+    expected_c = sum(
+        ((q_c[2 * i + j] - target_c[:, i]) ** 2).mean() for i in range(2) for j in range(2)
+    )
     close(out["loss_qvalue"], expected_r)
     close(out["loss_cost_qvalue"], expected_c)
     assert batch.get("td_error").shape == (32,)
@@ -321,12 +329,16 @@ def test_gradient_isolation():
         gs = torch.autograd.grad(value, flat, retain_graph=True, allow_unused=True)
         result, i = {}, 0
         for name, ps in groups.items():
-            result[name] = any(g is not None and bool(g.abs().sum() > 0) for g in gs[i : i + len(ps)])
+            result[name] = any(
+                g is not None and bool(g.abs().sum() > 0) for g in gs[i : i + len(ps)]
+            )
             i += len(ps)
         return result
 
     assert moved(out["loss_qvalue"] + out["loss_cost_qvalue"]) == {
-        "actor": False, "critics": True, "alpha": False
+        "actor": False,
+        "critics": True,
+        "alpha": False,
     }
     assert moved(out["loss_actor"]) == {"actor": True, "critics": False, "alpha": False}
     assert moved(out["loss_alpha"]) == {"actor": False, "critics": False, "alpha": True}
@@ -356,10 +368,14 @@ def test_critic_eval_auto_falls_back_with_different_architectures():
     out = loss(make_batch())
     assert torch.isfinite(out["loss_cost_qvalue"])
     with pytest.raises(ValueError, match="same architecture"):
-        SACLagLoss(make_actor(), make_critics(2), small_costs, num_costs=1, critic_eval="fused_vmap")
+        SACLagLoss(
+            make_actor(), make_critics(2), small_costs, num_costs=1, critic_eval="fused_vmap"
+        )
     dropout = [
-        ValueOperator(MLP(in_features=OBS + ACT, out_features=1, num_cells=[8], dropout=0.1),
-                      in_keys=["observation", "action"])
+        ValueOperator(
+            MLP(in_features=OBS + ACT, out_features=1, num_cells=[8], dropout=0.1),
+            in_keys=["observation", "action"],
+        )
         for _ in range(2)
     ]
     with pytest.raises(ValueError, match="torchrl MLPs"):
@@ -482,8 +498,15 @@ def test_in_and_out_keys():
     loss, *_ = make_loss(2)
     assert ("next", "cost") in loss.in_keys and "observation" in loss.in_keys
     assert set(loss.out_keys) == {
-        "loss_actor", "loss_qvalue", "loss_cost_qvalue", "loss_alpha",
-        "alpha", "entropy", "reward_q", "cost_q", "lagrangian",
+        "loss_actor",
+        "loss_qvalue",
+        "loss_cost_qvalue",
+        "loss_alpha",
+        "alpha",
+        "entropy",
+        "reward_q",
+        "cost_q",
+        "lagrangian",
     }
     loss.set_keys(cost="penalty")
     assert ("next", "penalty") in loss.in_keys
@@ -519,7 +542,10 @@ def test_fsrl_order_update_uses_the_updated_critics():
                 values.append(module(td.clone())[module.out_keys[0]].squeeze(-1))
         return torch.stack(values).min(0)[0]
 
-    q_r, q_c = q(loss.qvalue_network_params, critics[0]), q(loss.cost_qvalue_network_params, costs[0])
+    q_r, q_c = (
+        q(loss.qvalue_network_params, critics[0]),
+        q(loss.cost_qvalue_network_params, costs[0]),
+    )
     expected = ((ALPHA * logp - q_r).mean() + 0.8 * q_c.mean()) / 1.8
     close(out["loss_actor"], expected)
     assert not torch.allclose(q_r, q(critics_before, critics[0]))  # the critics did move first
