@@ -34,6 +34,9 @@ from s3rl_torchrl.objectives import (
 )
 from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
 
+# The velocity tasks have one cost signal; the loss and the controllers take m >= 1.
+NUM_COSTS = 1
+
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "relu": nn.ReLU,
     "tanh": nn.Tanh,
@@ -112,23 +115,31 @@ def build_agent(
         log_std_bounds=(net.log_std_min, net.log_std_max),
         activation=activation,
     )
-    qvalue = build_qvalue_network(
-        observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
-    )
+
+    # One module per critic (a list), so each keeps its own orthogonal init (FSRL); a single
+    # module would be copied and re-initialised by torchrl.
+    def critics(builder, count: int) -> list:
+        return [
+            builder(
+                observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
+            )
+            for _ in range(count)
+        ]
+
+    num_qvalue_nets = 2  # double critics (paper, FSRL)
+    qvalue = critics(build_qvalue_network, num_qvalue_nets)
     constrained = algo.lagrangian != "none"
     # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only cost
     # time, so the loss is built without them (it is then exactly SACLoss).
     cost_qvalue = (
-        build_cost_qvalue_network(
-            observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
-        )
-        if constrained
-        else None
+        critics(build_cost_qvalue_network, num_qvalue_nets * NUM_COSTS) if constrained else None
     )
     loss = SACLagLoss(
         actor,
         qvalue,
         cost_qvalue,
+        num_costs=NUM_COSTS if constrained else 0,
+        num_qvalue_nets=num_qvalue_nets,
         alpha_init=algo.alpha_init,
         fixed_alpha=not algo.auto_alpha,
         action_spec=action_spec,

@@ -19,6 +19,7 @@ from s3rl_torchrl.envs import BATCHING_CHOICES, task_names
 
 ALGO_NAMES = ("s3rl", "sac_lag", "sac", "s3rl_nolag")
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
+UPDATE_ORDERS = ("joint", "fsrl")
 ACTIVATIONS = ("relu", "tanh", "elu", "silu")
 LOGGER_BACKENDS = ("csv", "tensorboard", "wandb", "mlflow", "none")
 # backend -> (module it imports, the package extra that installs it)
@@ -135,12 +136,16 @@ class AlgoConfig:
     auto_alpha: bool = True
     batch_size: int = 256
     update_per_step: float = 0.2
+    # "joint": one forward, one backward of the summed losses (the paper's Algorithm 3; faster).
+    # "fsrl": critics step first, then the actor loss on the updated critics, then alpha.
+    update_order: str = "joint"
     buffer_size: int = 100_000
     contrastive_cfg: ContrastiveConfig = field(default_factory=ContrastiveConfig)
 
     def check(self, path: str) -> None:
         _check_choice(f"{path}.name", self.name, ALGO_NAMES)
         _check_choice(f"{path}.lagrangian", self.lagrangian, LAGRANGIAN_CHOICES)
+        _check_choice(f"{path}.update_order", self.update_order, UPDATE_ORDERS)
         self.pid.check(f"{path}.pid")
         self.contrastive_cfg.check(f"{path}.contrastive_cfg")
         _check_range(f"{path}.lagrangian_lr", self.lagrangian_lr, 0.0, low_inclusive=False)

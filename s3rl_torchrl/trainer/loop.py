@@ -32,7 +32,7 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
-from s3rl_torchrl.objectives import make_nstep_transform
+from s3rl_torchrl.objectives import make_nstep_transform, sac_lag_update
 from s3rl_torchrl.trainer.builders import (
     Agent,
     build_agent,
@@ -254,18 +254,18 @@ class Trainer:
         done = batch["next", "done"].squeeze(-1)
         if not done.any():
             return
-        costs = batch["next", "episode_cost"][done].sum(-1)
+        episode_costs = batch["next", "episode_cost"][done]  # [episodes, m]
         rewards = batch["next", "episode_reward"][done].sum(-1)
-        self._train_episodes.extend(zip(rewards.tolist(), costs.tolist()))
+        self._train_episodes.extend(zip(rewards.tolist(), episode_costs.sum(-1).tolist()))
         self.counters.episodes += int(done.sum())
         if self.agent.lagrangian is not None:
-            mean_cost = costs.mean()
+            mean_cost = episode_costs.mean(0)  # J per cost
             lagrangian = self.agent.lagrangian.update(mean_cost)
             self.agent.loss.lagrangian = lagrangian
             self.counters.lagrangian_updates += 1
             self.metrics.log_scalars(
                 {
-                    "lagrangian/episode_cost": float(mean_cost),
+                    "lagrangian/episode_cost": float(mean_cost.sum()),
                     "lagrangian/value": float(lagrangian.sum()),
                 },
                 step=self.counters.frames,
@@ -280,8 +280,11 @@ class Trainer:
         return self.cfg.algo.update_per_step * frames
 
     def _update(self, batch: TensorDictBase) -> TensorDictBase:
-        """One gradient step on a batch: all losses of one forward, then every optimiser."""
+        """One gradient step on a batch; returns the detached losses and diagnostics."""
         agent = self.agent
+        if self.cfg.algo.update_order == "fsrl":
+            return sac_lag_update(agent.loss, batch, agent.optimizers, agent.target_updater)
+        # The paper's Algorithm 3: every loss from one forward, one backward, every optimiser.
         losses = agent.loss(batch)
         total = sum(v for k, v in losses.items() if k.startswith("loss_"))
         for optimizer in self._optimizers:

@@ -170,3 +170,27 @@ def test_resuming_a_finished_run_only_evaluates(tiny_config, tmp_path):
     again = train(cfg, tmp_path / "ignored")
     assert again.status == "finished" and _counters(again) == _counters(first)
     assert [r["frames"] for r in read_metrics(tmp_path)] == ["200"]
+
+
+def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
+    cfg = tiny_config("algo=s3rl", "algo.update_order=fsrl", "task=SafetySwimmerVelocity-v1")
+    result = train(cfg, tmp_path)
+    assert result.counters.grad_steps == expected_grad_steps(cfg)
+    assert all(r["train/loss_actor"] != "nan" for r in read_metrics(tmp_path))
+
+
+def test_critics_keep_their_own_initialisation(tiny_config):
+    # One module per critic: every critic keeps FSRL's orthogonal init (torchrl would re-draw
+    # copies of a single module uniformly) and the critics differ from each other.
+    from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
+
+    cfg = tiny_config("algo=sac_lag")
+    env, _ = build_envs(cfg)
+    agent = build_agent(cfg, env, build_replay_buffer(cfg.algo))
+    for name in ("qvalue_network_params", "cost_qvalue_network_params"):
+        params = getattr(agent.loss, name)
+        first_layer = [p for k, p in params.items(True, True) if p.ndim == 3][0]  # [2, out, in]
+        assert not torch.equal(first_layer[0], first_layer[1])
+        for weight in first_layer:  # 32 x 23: orthonormal columns
+            gram = weight.T @ weight
+            torch.testing.assert_close(gram, torch.eye(gram.shape[0]), atol=1e-5, rtol=0)
