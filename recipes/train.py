@@ -28,7 +28,7 @@ def _main(cfg: DictConfig) -> float:
     try:
         train_cfg = validate(cfg)
         result = train(train_cfg, HydraConfig.get().runtime.output_dir)
-    except (ConfigError, CheckpointError) as err:
+    except (ConfigError, CheckpointError, FileExistsError) as err:
         print(f"s3rl-train: {err}", file=sys.stderr)
         sys.exit(2)
     # The return value is what Hydra sweepers (e.g. Optuna) optimise.

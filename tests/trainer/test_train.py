@@ -194,3 +194,12 @@ def test_critics_keep_their_own_initialisation(tiny_config):
         for weight in first_layer:  # 32 x 23: orthonormal columns
             gram = weight.T @ weight
             torch.testing.assert_close(gram, torch.eye(gram.shape[0]), atol=1e-5, rtol=0)
+
+
+def test_new_run_into_an_existing_run_dir_is_refused(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    train(cfg, tmp_path)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    with pytest.raises(FileExistsError, match="resume="):
+        train(tiny_config("algo=sac_lag", "collector.total_frames=200"), tmp_path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
