@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-import math
+import statistics
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -35,11 +35,6 @@ class EvalResult:
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
-
-
-def _mean_std(values: list[float]) -> tuple[float, float]:
-    mean = sum(values) / len(values)
-    return mean, math.sqrt(sum((v - mean) ** 2 for v in values) / len(values))
 
 
 def episode_statistics(rollout: TensorDictBase) -> list[tuple[float, float, int, int]]:
@@ -94,14 +89,12 @@ def evaluate(
             collected.extend(episode_statistics(rollout))
     collected = collected[:episodes]
     rewards, costs, lengths, safe = (list(x) for x in zip(*collected))
-    reward_mean, reward_std = _mean_std(rewards)
-    cost_mean, cost_std = _mean_std(costs)
     return EvalResult(
-        reward_mean=reward_mean,
-        reward_std=reward_std,
-        cost_mean=cost_mean,
-        cost_std=cost_std,
-        length_mean=sum(lengths) / len(lengths),
+        reward_mean=statistics.fmean(rewards),
+        reward_std=statistics.pstdev(rewards),
+        cost_mean=statistics.fmean(costs),
+        cost_std=statistics.pstdev(costs),
+        length_mean=statistics.fmean(lengths),
         safe_occupancy=100.0 * sum(safe) / sum(lengths),
         episodes=len(collected),
     )

@@ -50,7 +50,7 @@ from s3rl_torchrl.trainer.checkpoint import (
 )
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.evaluation import EvalResult, RandomPolicy, evaluate, format_table
-from s3rl_torchrl.trainer.metrics import METRICS_FILE, RunMetrics, make_torchrl_logger
+from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
 
 FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
@@ -149,12 +149,9 @@ class Trainer:
             check_compatible(checkpoint["config"], to_container(cfg), RESUME_LOCKED)
             run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
         self.run_dir = Path(run_dir)
-        if checkpoint is None and (self.run_dir / METRICS_FILE).exists():
-            # Refuse before anything is built or written: that run's files stay as they are.
-            raise FileExistsError(
-                f"{self.run_dir} already holds a run ({METRICS_FILE}); continue it with "
-                f"resume={self.run_dir} or train into a new directory."
-            )
+        if checkpoint is None:
+            # Before anything is built or written, so that run's files stay as they are.
+            ensure_new_run_dir(self.run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
 
         set_torch_threads(cfg.threads)

@@ -66,6 +66,15 @@ def _trim_csv(path: Path, max_step: int, step_index: int, has_header: bool) -> N
             csv.writer(f).writerows(header + kept)
 
 
+def ensure_new_run_dir(run_dir: str | Path) -> None:
+    """Refuse to start a new run where one already wrote its metrics (its files stay intact)."""
+    if (Path(run_dir) / METRICS_FILE).exists():
+        raise FileExistsError(
+            f"{run_dir} already holds a run ({METRICS_FILE}); continue it with "
+            f"resume={run_dir} or train into a new directory."
+        )
+
+
 class RunMetrics:
     """Writes epoch rows to ``metrics.csv`` and every scalar to a torchrl logger."""
 
@@ -73,11 +82,9 @@ class RunMetrics:
         self.path = Path(run_dir) / METRICS_FILE
         self.logger = logger
         self.columns: list[str] | None = None
+        if resume_frames is None:
+            ensure_new_run_dir(run_dir)
         if self.path.exists():
-            if resume_frames is None:
-                raise FileExistsError(
-                    f"{self.path} exists: resume the run (resume=<run dir>) or use a new directory."
-                )
             with self.path.open(newline="") as f:
                 self.columns = next(csv.reader(f), None)
             _trim_csv(self.path, resume_frames, self.columns.index(STEP_COLUMN), True)
