@@ -7,7 +7,8 @@
 Batch 256; actor ``build_s3rl_actor`` (128x128); critics ``build_qvalue_network`` (128x128): a
 double reward critic and, for SAC-Lag, one double cost critic (one cost, lambda = 0.3). Adam
 optimisers from ``make_sac_lag_optimizers`` (paper learning rates, fused Adam) for both losses,
-``SoftUpdate(tau=0.05)``. Two ways to take one full step (critics, actor, alpha, targets):
+``ForeachSoftUpdate(tau=0.05)`` (torchrl's ``SoftUpdate`` in one fused call). Two ways to take
+one full step (critics, actor, alpha, targets):
 
 - joint (torchrl's usual loop): ``loss(batch)``, one backward of the summed ``loss_*`` entries,
   the three optimiser steps, the soft update;
@@ -21,8 +22,10 @@ and, eager only, ``sac_lag_fused_vmap`` and ``sac_lag_vmap`` (the other ``critic
 All variants and modes of one env run in one fresh process, timed in interleaved rounds (each
 round runs every configuration for ``--steps`` steps) so that load from other processes hits
 all alike; the reported time is the median over rounds, as wall and as process CPU time (with
-one thread the CPU time leaves out the time other processes hold the core). ``compile`` wraps
-the loss module (joint) or its two halves (fsrl) in ``torch.compile`` (default mode). Compile
+one thread the CPU time leaves out the time other processes hold the core). Each step takes a
+fresh shallow copy of one batch that carries every entry of a real replay-buffer sample of the
+recipe (``make_batch``). ``compile`` wraps the loss module (joint) or its two halves (fsrl) with
+the trainer's ``compile_loss`` (``torch.compile``, default mode, isolated recompiles). Compile
 time: each variant alone in a fresh process with inductor's on-disk caches off, wall time of the
 first three steps minus three steady steps. Results: ``docs/objectives.md``.
 """
@@ -41,10 +44,16 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict
 from torchrl.data import Bounded
-from torchrl.objectives import SACLoss, SoftUpdate
+from torchrl.objectives import SACLoss
 
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network, build_s3rl_actor
-from s3rl_torchrl.objectives import SACLagLoss, make_sac_lag_optimizers, sac_lag_update
+from s3rl_torchrl.objectives import (
+    ForeachSoftUpdate,
+    SACLagLoss,
+    make_sac_lag_optimizers,
+    sac_lag_update,
+)
+from s3rl_torchrl.trainer import compile_loss
 
 ENVS = {"halfcheetah": (17, 6), "humanoid": (376, 17)}
 VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl", "sac_lag_fused_vmap", "sac_lag_vmap")
@@ -55,18 +64,50 @@ HIDDEN = (128, 128)
 
 
 def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
+    """A batch with the entries of a replay-buffer sample of the S3RL recipe: what the losses
+    read plus what the collector, transforms and sampler store alongside (policy outputs,
+    episode sums, counters, labels), since the eager losses' tensordict work grows with them."""
     g = torch.Generator().manual_seed(0)
+    flag = torch.zeros(batch, 1, dtype=torch.bool)
+    cost = (torch.rand(batch, 1, generator=g) > 0.7).float()
+    reward = torch.randn(batch, 1, generator=g)
+    step_count = torch.ones(batch, 1, dtype=torch.long)
     return TensorDict(
         {
             "observation": torch.randn(batch, obs_dim, generator=g),
             "action": torch.rand(batch, act_dim, generator=g) * 2 - 1,
             "steps_to_next_obs": torch.full((batch,), 2, dtype=torch.long),
+            # stored alongside by the collector (policy outputs), the transforms and the sampler
+            "embedding": torch.randn(batch, HIDDEN[-1], generator=g),
+            "loc": torch.randn(batch, act_dim, generator=g),
+            "scale": torch.rand(batch, act_dim, generator=g),
+            "action_log_prob": torch.randn(batch, generator=g),
+            "collector": {"traj_ids": torch.zeros(batch, dtype=torch.long)},
+            "index": torch.arange(batch),
+            "cost": cost.clone(),
+            "episode_cost": cost.clone(),
+            "episode_reward": reward.clone(),
+            "safe": cost == 0,
+            "step_count": step_count,
+            "done": flag,
+            "terminated": flag,
+            "truncated": flag,
+            "is_init": flag,
             "next": {
                 "observation": torch.randn(batch, obs_dim, generator=g),
-                "reward": torch.randn(batch, 1, generator=g),
-                "cost": (torch.rand(batch, 1, generator=g) > 0.7).float(),
-                "done": torch.zeros(batch, 1, dtype=torch.bool),
-                "terminated": torch.zeros(batch, 1, dtype=torch.bool),
+                "reward": reward,
+                "cost": cost,
+                "done": flag,
+                "terminated": flag,
+                # stored alongside
+                "reward_orig": reward.clone(),
+                "cost_orig": cost.clone(),
+                "episode_cost": cost.clone(),
+                "episode_reward": reward.clone(),
+                "safe": cost == 0,
+                "step_count": step_count + 1,
+                "truncated": flag,
+                "is_init": flag,
             },
         },
         [batch],
@@ -95,9 +136,11 @@ class Stepper:
         torch.manual_seed(0)
         self.loss = loss = make_loss(variant, obs_dim, act_dim)
         self.optimizers = make_sac_lag_optimizers(loss)
-        self.updater = SoftUpdate(loss, tau=0.05)
+        self.updater = ForeachSoftUpdate(loss, tau=0.05)
         self.batch = make_batch(obs_dim, act_dim)
-        wrap = torch.compile if compiled else (lambda f: f)
+        # The trainer's compile (isolated recompiles: the variants share torchrl's and
+        # tensordict's forward wrappers, see compile_loss).
+        wrap = compile_loss if compiled else (lambda f: f)
         if not variant.endswith("_fsrl"):
             self.forward = wrap(loss)
             self.step = self.joint_step
@@ -108,8 +151,13 @@ class Stepper:
             self.critic_loss, self.actor_loss = wrap(loss.qvalue_v2_loss), wrap(loss.actor_loss)
             self.step = self.sac_fsrl_step
 
+    def fresh_batch(self) -> TensorDict:
+        # A new batch object each step, as from a replay buffer: the losses write `td_error`
+        # into their input, and a compiled loss fed the same object again would recompile.
+        return self.batch.copy()
+
     def joint_step(self) -> None:
-        out = self.forward(self.batch)
+        out = self.forward(self.fresh_batch())
         total = sum(value for key, value in out.items() if key.startswith("loss_"))
         total.backward()
         for optimizer in self.optimizers:
@@ -120,7 +168,7 @@ class Stepper:
     def sac_lag_fsrl_step(self) -> None:
         sac_lag_update(
             self.loss,
-            self.batch,
+            self.fresh_batch(),
             self.optimizers,
             self.updater,
             critic_loss=self.critic_loss,
@@ -130,11 +178,12 @@ class Stepper:
     def sac_fsrl_step(self) -> None:
         # The same order with torchrl's SACLoss pieces.
         opt = self.optimizers
-        loss_qvalue, _ = self.critic_loss(self.batch)
+        batch = self.fresh_batch()
+        loss_qvalue, _ = self.critic_loss(batch)
         opt.critic.zero_grad(set_to_none=True)
         loss_qvalue.backward()
         opt.critic.step()
-        loss_actor, metadata = self.actor_loss(self.batch)
+        loss_actor, metadata = self.actor_loss(batch)
         opt.actor.zero_grad(set_to_none=True)
         loss_actor.backward()
         opt.actor.step()

@@ -25,7 +25,7 @@ from s3rl_torchrl.trainer.config import (
     validate,
 )
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
-from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, train
+from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, compile_loss, train
 
 __all__ = [
     "AlgoConfig",
@@ -44,6 +44,7 @@ __all__ = [
     "TrainConfig",
     "TrainResult",
     "Trainer",
+    "compile_loss",
     "evaluate",
     "format_table",
     "load_checkpoint",

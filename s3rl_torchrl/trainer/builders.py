@@ -24,6 +24,7 @@ from s3rl_torchrl.modules import (
     get_policy_encoder,
 )
 from s3rl_torchrl.objectives import (
+    ForeachSoftUpdate,
     LagrangianController,
     LearnedLagrangian,
     PIDLagrangian,
@@ -148,7 +149,7 @@ def build_agent(
         lagrangian_init=algo.lagrangian_init if constrained else 0.0,
     )
     loss.make_value_estimator(gamma=algo.gamma)
-    target_updater = SoftUpdate(loss, tau=algo.tau)
+    target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
     optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
     lagrangian = build_lagrangian(algo, cfg.task.cost_limit) if constrained else None
 
@@ -163,7 +164,9 @@ def build_agent(
             momentum_encoder=c.momentum_tau is not None,
         )
         view = SafeUnsafeSampler.contrastive_view(replay_buffer, c.batch_size)
-        updater = SoftUpdate(infonce, tau=c.momentum_tau) if c.momentum_tau is not None else None
+        updater = None
+        if c.momentum_tau is not None:
+            updater = ForeachSoftUpdate(infonce, tau=c.momentum_tau)
         contrastive = ContrastivePhase(
             infonce, view, c.lr, num_steps=c.steps, target_updater=updater
         )

@@ -17,6 +17,7 @@ from torchrl.objectives.sac import compute_rsample_log_prob
 
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network
 from s3rl_torchrl.objectives import (
+    ForeachSoftUpdate,
     PIDLagrangian,
     SACLagLoss,
     make_nstep_transform,
@@ -434,6 +435,52 @@ def test_soft_update_covers_cost_critics():
     expected = before.apply(lambda t, s: 0.95 * t + 0.05 * s, loss.cost_qvalue_network_params)
     for key, value in expected.flatten_keys().items():
         close(loss.target_cost_qvalue_network_params.flatten_keys()[key], value)
+
+
+@pytest.mark.parametrize("num_costs", [0, 1, 2])
+def test_foreach_soft_update_matches_soft_update(num_costs):
+    loss, *_ = make_loss(num_costs)
+    twin = copy.deepcopy(loss)
+    reference, fused = SoftUpdate(loss, tau=0.05), ForeachSoftUpdate(twin, tau=0.05)
+    names = ["qvalue_network_params"] + ["cost_qvalue_network_params"] * bool(num_costs)
+    before = {name: getattr(loss, "target_" + name).clone() for name in names}
+    g = torch.Generator().manual_seed(0)
+    for _ in range(3):  # the same parameter moves on both losses, then one update each
+        for name in names:
+            source = getattr(loss, name).flatten_keys()
+            noise = {key: torch.randn(value.shape, generator=g) for key, value in source.items()}
+            with torch.no_grad():
+                for module in (loss, twin):
+                    for key, value in getattr(module, name).flatten_keys().items():
+                        value.add_(noise[key])
+        reference.step()
+        fused.step()
+    for name in names:
+        target = getattr(loss, "target_" + name).flatten_keys()
+        twin_target = getattr(twin, "target_" + name).flatten_keys()
+        moved = before[name].flatten_keys()
+        assert all(not torch.equal(target[key], moved[key]) for key in target.keys())
+        for key, value in target.items():
+            close(twin_target[key], value)
+    # The actor has no target network: untouched by either updater.
+    for key, value in loss.actor_network_params.flatten_keys().items():
+        assert torch.equal(twin.actor_network_params.flatten_keys()[key], value)
+
+
+def test_foreach_soft_update_formula_and_state():
+    loss, *_ = make_loss(1)
+    updater = ForeachSoftUpdate(loss, tau=0.25)
+    target = loss.target_cost_qvalue_network_params
+    before = target.clone()
+    with torch.no_grad():
+        loss.cost_qvalue_network_params.apply(lambda p: p.mul_(-1.0).add_(2.0))
+    updater.step()
+    expected = before.apply(lambda t, s: 0.75 * t + 0.25 * s, loss.cost_qvalue_network_params)
+    for key, value in expected.flatten_keys().items():
+        close(target.flatten_keys()[key], value)
+    fresh = ForeachSoftUpdate(make_loss(1)[0], tau=0.25)
+    fresh.load_state_dict(updater.state_dict())
+    assert fresh.initialized and fresh.eps == pytest.approx(0.75)
 
 
 def test_optimizers_cover_the_parameter_groups():

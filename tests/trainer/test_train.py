@@ -179,6 +179,29 @@ def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
     assert all(r["train/loss_actor"] != "nan" for r in read_metrics(tmp_path))
 
 
+@pytest.mark.parametrize("update_order", ["joint", "fsrl"])
+def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp_path):
+    # compile=true: the loss (joint) or its two halves (fsrl) go through torch.compile.
+    cfg = tiny_config(
+        "algo=sac_lag",
+        f"algo.update_order={update_order}",
+        "compile=true",
+        "collector.total_frames=300",
+        "collector.frames_per_epoch=300",
+    )
+    trainer = Trainer(cfg, tmp_path)
+    compiled = [trainer._loss_forward] if update_order == "joint" else [
+        trainer._critic_loss, trainer._actor_loss
+    ]
+    assert all(hasattr(fn, "_torchdynamo_orig_callable") or hasattr(fn, "_orig_mod")
+               for fn in compiled)
+    result = trainer.run()
+    assert result.counters.grad_steps == expected_grad_steps(cfg) > 0
+    (row,) = read_metrics(tmp_path)
+    for key in ("train/loss_actor", "train/loss_qvalue", "train/loss_cost_qvalue"):
+        assert torch.isfinite(torch.tensor(float(row[key])))
+
+
 def test_critics_keep_their_own_initialisation(tiny_config):
     # One module per critic: every critic keeps FSRL's orthogonal init (torchrl would re-draw
     # copies of a single module uniformly) and the critics differ from each other.
