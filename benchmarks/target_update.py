@@ -1,0 +1,72 @@
+"""Microseconds per target update: torchrl's ``SoftUpdate`` against ``ForeachSoftUpdate``.
+
+    python benchmarks/target_update.py [--calls 1000] [--rounds 7] \
+        [--out benchmarks/results/target_update.json]
+
+The loss of ``benchmarks/loss_step.py`` (``SACLagLoss``, HalfCheetah sizes, 128x128, one cost:
+four critics with targets), one thread, both updaters on the same loss, timed in interleaved
+rounds of ``--calls`` calls; the median over rounds is reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+from torchrl.objectives import SoftUpdate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from loss_step import ENVS, make_loss  # noqa: E402
+
+from s3rl_torchrl.objectives import ForeachSoftUpdate  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calls", type=int, default=1000)
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/target_update.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    loss = make_loss("sac_lag", *ENVS["halfcheetah"])
+    updaters = {
+        "SoftUpdate": SoftUpdate(loss, tau=0.05),
+        "ForeachSoftUpdate": ForeachSoftUpdate(loss, tau=0.05),
+    }
+    times = {name: [] for name in updaters}
+    for updater in updaters.values():
+        for _ in range(100):
+            updater.step()
+    for _ in range(args.rounds):
+        for name, updater in updaters.items():
+            start = time.perf_counter()
+            for _ in range(args.calls):
+                updater.step()
+            times[name].append((time.perf_counter() - start) / args.calls * 1e6)
+    rows = {
+        name: {"us_per_step": round(statistics.median(t), 1), "rounds": [round(x, 1) for x in t]}
+        for name, t in times.items()
+    }
+    for name, row in rows.items():
+        print(f"{name:18s} {row['us_per_step']:8.1f} us per step")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(
+        json.dumps(
+            {
+                "command": "python " + " ".join(sys.argv),
+                "machine": {"platform": platform.platform(), "torch": torch.__version__},
+                "results": rows,
+            },
+            indent=2,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
