@@ -65,8 +65,8 @@ HIDDEN = (128, 128)
 
 def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
     """A batch with the entries of a replay-buffer sample of the S3RL recipe: what the losses
-    read plus what the collector, transforms and sampler store alongside (policy outputs,
-    episode sums, counters, labels), since the eager losses' tensordict work grows with them."""
+    read plus what the collector, transforms and sampler store alongside (episode sums,
+    counters, labels), since the eager losses' tensordict work grows with them."""
     g = torch.Generator().manual_seed(0)
     flag = torch.zeros(batch, 1, dtype=torch.bool)
     cost = (torch.rand(batch, 1, generator=g) > 0.7).float()
@@ -77,11 +77,7 @@ def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
             "observation": torch.randn(batch, obs_dim, generator=g),
             "action": torch.rand(batch, act_dim, generator=g) * 2 - 1,
             "steps_to_next_obs": torch.full((batch,), 2, dtype=torch.long),
-            # stored alongside by the collector (policy outputs), the transforms and the sampler
-            "embedding": torch.randn(batch, HIDDEN[-1], generator=g),
-            "loc": torch.randn(batch, act_dim, generator=g),
-            "scale": torch.rand(batch, act_dim, generator=g),
-            "action_log_prob": torch.randn(batch, generator=g),
+            # stored alongside by the collector, the transforms and the sampler
             "collector": {"traj_ids": torch.zeros(batch, dtype=torch.long)},
             "index": torch.arange(batch),
             "cost": cost.clone(),

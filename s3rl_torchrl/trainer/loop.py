@@ -175,6 +175,10 @@ class Trainer:
             make_nstep_transform(cfg.algo.n_step, cfg.algo.gamma) if cfg.algo.n_step > 1 else None
         )
         self._optimizers = [o for o in self.agent.optimizers if o is not None]
+        # What the collector's policy wrote besides the action (embedding, loc, scale, log-prob):
+        # nothing reads it back from the buffer, and it was ~2/3 of each stored transition.
+        action_key = self.agent.loss.tensor_keys.action
+        self._policy_outputs = [k for k in self.agent.actor.out_keys if k != action_key]
         # torch.compile of the loss (its forward and, through AOTAutograd, its backward); the
         # optimiser and target steps stay eager (fused Adam, one foreach lerp). The first steps
         # pay the compile time (docs/benchmarks.md says when it pays off).
@@ -266,7 +270,7 @@ class Trainer:
     def _store(self, batch: TensorDictBase) -> None:
         data = self.nstep.inv(batch) if self.nstep is not None else batch
         if data is not None and data.numel():
-            self.replay_buffer.extend(data.reshape(-1))
+            self.replay_buffer.extend(data.exclude(*self._policy_outputs).reshape(-1))
 
     def _update_lagrangian(self, batch: TensorDictBase) -> None:
         done = batch["next", "done"].squeeze(-1)

@@ -202,6 +202,24 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         assert torch.isfinite(torch.tensor(float(row[key])))
 
 
+def test_buffer_stores_transitions_without_policy_outputs(tiny_config, tmp_path):
+    cfg = tiny_config("algo=s3rl", "collector.total_frames=300")
+    trainer = Trainer(cfg, tmp_path)
+    trainer.run()
+    stored = set(trainer.replay_buffer[:].keys(True, True))
+    # What the losses, the n-step targets and the safe/unsafe sampler read is kept ...
+    needed = {
+        "observation", "action", "steps_to_next_obs", "safe", ("next", "observation"),
+        ("next", "reward"), ("next", "cost"), ("next", "done"), ("next", "terminated"),
+    }
+    assert needed <= stored
+    # ... the policy's outputs besides the action are not (nothing reads them back).
+    assert {"embedding", "loc", "scale", "action_log_prob"}.isdisjoint(stored)
+    assert set(trainer.agent.actor.out_keys) - {"action"} == {
+        "embedding", "loc", "scale", "action_log_prob"
+    }
+
+
 def test_critics_keep_their_own_initialisation(tiny_config):
     # One module per critic: every critic keeps FSRL's orthogonal init (torchrl would re-draw
     # copies of a single module uniformly) and the critics differ from each other.
