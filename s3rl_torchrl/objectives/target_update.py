@@ -18,8 +18,8 @@ class ForeachSoftUpdate(SoftUpdate):
     by one; with the four critics of :class:`~s3rl_torchrl.objectives.SACLagLoss` that measured
     382 µs per call against 106 µs for this class (``benchmarks/target_update.py``).
 
-    The leaf lists are rebuilt on each call, so parameters replaced after construction (a
-    device move, a new ``TensorDictParams``) are followed as ``SoftUpdate`` follows them.
+    The leaf lists are read on each call from ``SoftUpdate``'s own source and target
+    tensordicts, so both classes update exactly the same tensors.
     """
 
     def _leaves(self) -> tuple[list[Tensor], list[Tensor]]:

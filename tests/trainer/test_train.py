@@ -195,7 +195,11 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
     ]
     assert all(hasattr(fn, "_torchdynamo_orig_callable") or hasattr(fn, "_orig_mod")
                for fn in compiled)
+    from torch._dynamo.utils import counters
+
+    counters.clear()
     result = trainer.run()
+    assert counters["stats"]["unique_graphs"] >= 1  # dynamo did capture the loss
     assert result.counters.grad_steps == expected_grad_steps(cfg) > 0
     (row,) = read_metrics(tmp_path)
     for key in ("train/loss_actor", "train/loss_qvalue", "train/loss_cost_qvalue"):
