@@ -17,6 +17,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
+from _report import write_report
 
 import s3rl_torchrl  # noqa: F401  (registers the tasks)
 from s3rl_torchrl.envs import make_env
@@ -80,8 +81,7 @@ def main() -> None:
         "unit": "env steps (frames) per second",
         "rows": rows,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
+    write_report(args.out, result)
     columns = [c for c in rows[0] if c != "task"]
     print("\n| task | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")

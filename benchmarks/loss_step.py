@@ -33,7 +33,6 @@ first three steps minus three steady steps. Results: ``docs/objectives.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing as mp
 import os
 import platform
@@ -42,6 +41,7 @@ import time
 from pathlib import Path
 
 import torch
+from _report import write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.objectives import SACLoss
@@ -330,9 +330,7 @@ def main() -> None:
         "loadavg_after": [round(x, 2) for x in os.getloadavg()],
         "results": results,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(payload, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, payload)
 
 
 if __name__ == "__main__":

@@ -18,14 +18,13 @@ import argparse
 import json
 import math
 import multiprocessing as mp
-import platform
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from _report import command_line, machine, write_report
 
 OBS, ACT, HIDDEN, BATCH, NETS = 17, 6, 128, 256, 4
 
@@ -149,16 +148,8 @@ def main() -> None:
             row = pool.apply(measure, (threads, args.steps, args.rounds))
         print(json.dumps(row), flush=True)
         rows.append(row)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
-        json.dumps(
-            {
-                "command": "python " + " ".join(sys.argv),
-                "machine": {"platform": platform.platform(), "torch": torch.__version__},
-                "rows": rows,
-            },
-            indent=2,
-        )
+    write_report(
+        args.out, {"command": command_line(), "machine": machine(), "rows": rows}
     )
 
 

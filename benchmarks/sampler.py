@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import torch
+from _report import write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded, LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
@@ -198,9 +199,7 @@ def main() -> None:
             "load_average_after": os.getloadavg(),
         },
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    write_report(args.out, report)
 
 
 if __name__ == "__main__":

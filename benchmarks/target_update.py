@@ -11,20 +11,16 @@ rounds of ``--calls`` calls; the median over rounds is reported.
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import torch
+from _report import command_line, machine, write_report
+from loss_step import ENVS, make_loss
 from torchrl.objectives import SoftUpdate
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from loss_step import ENVS, make_loss  # noqa: E402
-
-from s3rl_torchrl.objectives import ForeachSoftUpdate  # noqa: E402
+from s3rl_torchrl.objectives import ForeachSoftUpdate
 
 
 def main() -> None:
@@ -55,16 +51,8 @@ def main() -> None:
     }
     for name, row in rows.items():
         print(f"{name:18s} {row['us_per_step']:8.1f} us per step")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
-        json.dumps(
-            {
-                "command": "python " + " ".join(sys.argv),
-                "machine": {"platform": platform.platform(), "torch": torch.__version__},
-                "results": rows,
-            },
-            indent=2,
-        )
+    write_report(
+        args.out, {"command": command_line(), "machine": machine(), "results": rows}
     )
 
 

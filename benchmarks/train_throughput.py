@@ -14,13 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-import torch
+from _report import command_line, machine, write_report
 from hydra import compose, initialize_config_dir
 
 from s3rl_torchrl.trainer import Trainer, register_configs, validate
@@ -87,16 +85,8 @@ def main() -> None:
         row = measure(args.task, args.frames, mode == "compiled", args.threads)
         print(json.dumps(row), flush=True)
         rows.append(row)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(
-        json.dumps(
-            {
-                "command": "python " + " ".join(sys.argv),
-                "machine": {"platform": platform.platform(), "torch": torch.__version__},
-                "rows": rows,
-            },
-            indent=2,
-        )
+    write_report(
+        args.out, {"command": command_line(), "machine": machine(), "rows": rows}
     )
 
 

@@ -16,29 +16,28 @@ class ForeachSoftUpdate(SoftUpdate):
     same construction (``ForeachSoftUpdate(loss, tau=0.05)``), ``init_``, ``state_dict`` and
     ``load_state_dict``. ``SoftUpdate.step`` walks the parameter tensordicts and lerps them one
     by one; with the four critics of :class:`~s3rl_torchrl.objectives.SACLagLoss` that measured
-    382 µs per call against 106 µs for this class (``benchmarks/target_update.py``).
+    several times the cost of this class (``benchmarks/target_update.py``).
 
-    The leaf lists are read on each call from ``SoftUpdate``'s own source and target
-    tensordicts, so both classes update exactly the same tensors.
+    The leaves are listed once, by :meth:`init_`, from ``SoftUpdate``'s own source and target
+    tensordicts (which it also keeps from ``init_`` on), so both classes update the same tensors.
     """
 
-    def _leaves(self) -> tuple[list[Tensor], list[Tensor]]:
-        sources, targets = [], []
+    def init_(self) -> None:
+        super().init_()
+        self._source_leaves: list[Tensor] = []
+        self._target_leaves: list[Tensor] = []
         for key, source in self._sources.items(True, True):
             if not isinstance(key, tuple):
                 key = (key,)
-            target = self._targets.get(("target_" + key[0], *key[1:]))
-            if target.requires_grad:
-                raise RuntimeError("the target parameter is part of a graph.")
-            sources.append(source.data)
-            targets.append(target.data)
-        return sources, targets
+            self._source_leaves.append(source)
+            self._target_leaves.append(self._targets.get(("target_" + key[0], *key[1:])))
 
     def step(self) -> None:
         if not self.initialized:
             raise RuntimeError(
                 f"{type(self).__name__} must be initialized (`init_()`) before calling step()."
             )
-        sources, targets = self._leaves()
+        if any(target.requires_grad for target in self._target_leaves):
+            raise RuntimeError("the target parameter is part of a graph.")
         with torch.no_grad():
-            torch._foreach_lerp_(targets, sources, 1 - self.eps)
+            torch._foreach_lerp_(self._target_leaves, self._source_leaves, 1 - self.eps)
