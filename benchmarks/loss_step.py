@@ -65,45 +65,24 @@ HIDDEN = (128, 128)
 
 def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
     """A batch with the entries of a replay-buffer sample of the S3RL recipe: what the losses
-    read plus what the collector, transforms and sampler store alongside (episode sums,
-    counters, labels), since the eager losses' tensordict work grows with them."""
+    read plus the safe/unsafe label and the sampler's index, which is all the trainer stores
+    (``Trainer._keys_read_from_buffer``)."""
     g = torch.Generator().manual_seed(0)
     flag = torch.zeros(batch, 1, dtype=torch.bool)
     cost = (torch.rand(batch, 1, generator=g) > 0.7).float()
-    reward = torch.randn(batch, 1, generator=g)
-    step_count = torch.ones(batch, 1, dtype=torch.long)
     return TensorDict(
         {
             "observation": torch.randn(batch, obs_dim, generator=g),
             "action": torch.rand(batch, act_dim, generator=g) * 2 - 1,
             "steps_to_next_obs": torch.full((batch,), 2, dtype=torch.long),
-            # stored alongside by the collector, the transforms and the sampler
-            "collector": {"traj_ids": torch.zeros(batch, dtype=torch.long)},
-            "index": torch.arange(batch),
-            "cost": cost.clone(),
-            "episode_cost": cost.clone(),
-            "episode_reward": reward.clone(),
-            "safe": cost == 0,
-            "step_count": step_count,
-            "done": flag,
-            "terminated": flag,
-            "truncated": flag,
-            "is_init": flag,
+            "index": torch.arange(batch),  # written by the replay buffer on sampling
             "next": {
                 "observation": torch.randn(batch, obs_dim, generator=g),
-                "reward": reward,
+                "reward": torch.randn(batch, 1, generator=g),
                 "cost": cost,
                 "done": flag,
                 "terminated": flag,
-                # stored alongside
-                "reward_orig": reward.clone(),
-                "cost_orig": cost.clone(),
-                "episode_cost": cost.clone(),
-                "episode_reward": reward.clone(),
                 "safe": cost == 0,
-                "step_count": step_count + 1,
-                "truncated": flag,
-                "is_init": flag,
             },
         },
         [batch],

@@ -1,5 +1,6 @@
 """Network builders: the S3RL actor (policy encoder + Gaussian head) and the critics."""
 
+from s3rl_torchrl.modules.activation import ReLU, relu  # noqa: F401
 from s3rl_torchrl.modules.actor import (  # noqa: F401
     GaussianHead,
     PolicyEncoder,

@@ -18,6 +18,8 @@ from torchrl.data import Bounded, TensorSpec
 from torchrl.envs.utils import ExplorationType
 from torchrl.modules import ProbabilisticActor, TanhNormal
 
+from s3rl_torchrl.modules.activation import ReLU
+
 __all__ = ["PolicyEncoder", "GaussianHead", "build_s3rl_actor", "get_policy_encoder"]
 
 
@@ -99,7 +101,7 @@ def build_s3rl_actor(
     action_spec: TensorSpec,
     hidden: Sequence[int] = (128, 128),
     log_std_bounds: tuple[float, float] = (-20.0, 2.0),
-    activation: type[nn.Module] = nn.ReLU,
+    activation: type[nn.Module] = ReLU,
     *,
     unbounded: bool = False,
     observation_key: NestedKey = "observation",
@@ -120,7 +122,8 @@ def build_s3rl_actor(
         hidden: encoder layer sizes; the last one is the embedding size. Defaults to
             ``(128, 128)`` (paper).
         log_std_bounds: clamp of the log-std. Defaults to ``(-20, 2)`` (FSRL).
-        activation: activation class used after every encoder layer. Defaults to ``nn.ReLU``.
+        activation: activation class used after every encoder layer. Defaults to
+            :class:`~s3rl_torchrl.modules.ReLU` (``nn.ReLU`` that stays fast under ``torch.compile``).
 
     Keyword Args:
         unbounded: leave the Gaussian mean unsquashed (see :class:`GaussianHead`).

@@ -22,6 +22,8 @@ from tensordict.nn import TensorDictModule
 from torch import nn
 from torchrl.modules import MLP, ValueOperator
 
+from s3rl_torchrl.modules.activation import ReLU
+
 __all__ = [
     "COST_QVALUE_KEY",
     "QVALUE_KEY",
@@ -67,7 +69,7 @@ def build_qvalue_network(
     out_key: str = QVALUE_KEY,
     observation_key: str = "observation",
     action_key: str = "action",
-    activation_class: type[nn.Module] = nn.ReLU,
+    activation_class: type[nn.Module] = ReLU,
     device: torch.device | str | None = None,
 ) -> TensorDictModule:
     """One Q-network ``[observation, action] -> out_key`` (shape ``[..., num_outputs]``).
@@ -79,7 +81,8 @@ def build_qvalue_network(
         num_outputs: size of the output's trailing dimension; 1 for a scalar Q-value.
         out_key: output key; ``"state_action_value"`` is what torchrl's ``SACLoss`` reads.
         observation_key, action_key: input keys.
-        activation_class: hidden activation (FSRL: ReLU).
+        activation_class: hidden activation (FSRL: ReLU; default :class:`~s3rl_torchrl.modules.ReLU`,
+            ``nn.ReLU`` that stays fast under ``torch.compile``).
         device: where to create the parameters.
     """
     hidden = _check_dims(observation_dim, action_dim, hidden, num_outputs)
@@ -103,7 +106,7 @@ def build_cost_qvalue_network(
     out_key: str = COST_QVALUE_KEY,
     observation_key: str = "observation",
     action_key: str = "action",
-    activation_class: type[nn.Module] = nn.ReLU,
+    activation_class: type[nn.Module] = ReLU,
     device: torch.device | str | None = None,
 ) -> TensorDictModule:
     """One cost Q-network ``[observation, action] -> "state_action_cost_value"`` (``[..., 1]``).

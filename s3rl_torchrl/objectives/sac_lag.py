@@ -38,12 +38,15 @@ from torchrl.objectives.utils import (
     distance_loss,
 )
 
+from s3rl_torchrl.modules.activation import ReLU, relu
+
 __all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers", "sac_lag_update"]
 
 _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
 _CRITIC_EVAL_CHOICES = ("auto", "batched_mlp", "fused_vmap", "vmap")
 # Elementwise activations: applying them to [N, batch, features] equals applying them per net.
 _ELEMENTWISE = (
+    ReLU,
     nn.ReLU,
     nn.ReLU6,
     nn.LeakyReLU,
@@ -122,7 +125,8 @@ class _BatchedMLP:
             if layer[0] == "act":
                 # In place where autograd allows it (no op before ReLU saves its output): fewer
                 # [N, batch, width] temporaries, which measurably cost page faults on CPU.
-                x = torch.relu_(x) if type(layer[1]) is nn.ReLU else layer[1](x)
+                # Compiled, `relu` keeps bool masks out of the graph (modules/activation.py).
+                x = relu(x, inplace=True) if type(layer[1]) in (nn.ReLU, ReLU) else layer[1](x)
             else:
                 weight, bias = self._leaf(parts, layer[1]), self._leaf(parts, layer[2])
                 x = torch.baddbmm(bias.unsqueeze(-2), x, weight.transpose(-1, -2))

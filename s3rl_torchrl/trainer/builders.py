@@ -18,6 +18,7 @@ from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.envs import make_env
 from s3rl_torchrl.modules import (
     ContrastivePhase,
+    ReLU,
     build_cost_qvalue_network,
     build_qvalue_network,
     build_s3rl_actor,
@@ -39,7 +40,7 @@ from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
 NUM_COSTS = 1
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
-    "relu": nn.ReLU,
+    "relu": ReLU,  # nn.ReLU that stays fast under torch.compile (modules/activation.py)
     "tanh": nn.Tanh,
     "elu": nn.ELU,
     "silu": nn.SiLU,

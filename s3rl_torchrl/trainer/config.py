@@ -39,6 +39,24 @@ def _fail(path: str, value: Any, allowed: str) -> None:
     raise ConfigError(f"Invalid value {value!r} for '{path}': {allowed}.")
 
 
+def _check_cpp_compiler(path: str) -> None:
+    """torch.compile on CPU builds C++ kernels: fail here, not at the first gradient step."""
+    from torch._inductor import config as inductor_config
+    from torch._inductor.cpp_builder import get_cpp_compiler
+    from torch._inductor.exc import InvalidCxxCompiler
+
+    try:
+        get_cpp_compiler()
+    except InvalidCxxCompiler:
+        tried = [cxx for cxx in inductor_config.cpp.cxx if cxx]
+        _fail(
+            path,
+            True,
+            f"torch.compile on CPU needs a C++ compiler and none of {tried} runs (or set CXX); "
+            "install one (Debian/Ubuntu: apt-get install g++) or pass compile=false",
+        )
+
+
 def _check_choice(path: str, value: Any, choices: tuple) -> None:
     if value not in choices:
         _fail(path, value, "allowed values are " + ", ".join(map(str, choices)))
@@ -254,7 +272,8 @@ class TrainConfig:
     # torch intra-op threads; 0 keeps torch's default. One is the robust choice on 2 shared
     # cores: two threads stall whenever another process runs (docs/benchmarks.md).
     threads: int = 1
-    compile: bool = False
+    # torch.compile of the loss (the package's ReLU keeps it fast on CPU, docs/objectives.md).
+    compile: bool = True
     save_interval: int = 4  # epochs between checkpoints (and one at the end)
     resume: str | None = None  # a run directory to continue
 
@@ -265,6 +284,8 @@ class TrainConfig:
         _check_choice(prefix + "device", self.device, DEVICES)
         _check_range(prefix + "threads", self.threads, 0)
         _check_range(prefix + "save_interval", self.save_interval, 1)
+        if self.compile and self.device == "cpu":
+            _check_cpp_compiler(prefix + "compile")
         if self.collector.frames_per_epoch % self.collector.frames_per_batch:
             _fail(
                 prefix + "collector.frames_per_epoch",

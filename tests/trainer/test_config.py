@@ -101,3 +101,17 @@ def test_experiment_overrides_the_primary_config(compose):
     assert validate(compose("experiment=paper")).save_interval == 4
     # ... and the command line wins over both.
     assert validate(compose("experiment=tiny", "threads=2")).threads == 2
+
+
+def test_compile_without_a_cpp_compiler_fails_before_training(compose):
+    from torch._inductor import config as inductor_config
+
+    cfg = compose("compile=true")
+    validate(cfg)  # this machine has g++
+    with inductor_config.patch({"cpp.cxx": (None, "no-such-c++-compiler")}):
+        with pytest.raises(ConfigError) as err:
+            validate(cfg)
+        validate(compose("compile=false"))  # the way out the message names
+    message = str(err.value)
+    assert "'compile'" in message and "no-such-c++-compiler" in message
+    assert "compile=false" in message and "g++" in message

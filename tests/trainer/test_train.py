@@ -206,22 +206,28 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         assert torch.isfinite(torch.tensor(float(row[key])))
 
 
-def test_buffer_stores_transitions_without_policy_outputs(tiny_config, tmp_path):
-    cfg = tiny_config("algo=s3rl", "collector.total_frames=300")
+@pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1)])
+def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_path):
+    cfg = tiny_config(f"algo={algo}", f"algo.n_step={n_step}", "collector.total_frames=300")
     trainer = Trainer(cfg, tmp_path)
     trainer.run()
     stored = set(trainer.replay_buffer[:].keys(True, True))
-    # What the losses, the n-step targets and the safe/unsafe sampler read is kept ...
+    # The losses' inputs (n-step reward and discount exponent), the safe/unsafe label the
+    # sampler partitions on (the contrastive encoder reads the observation) ...
     needed = {
-        "observation", "action", "steps_to_next_obs", "safe", ("next", "observation"),
-        ("next", "reward"), ("next", "cost"), ("next", "done"), ("next", "terminated"),
+        "observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
+        ("next", "terminated"), ("next", "safe"),
+        "index",  # torchrl's TensorDict writer stores each transition's slot
     }
-    assert needed <= stored
-    # ... the policy's outputs besides the action are not (nothing reads them back).
-    assert {"embedding", "loc", "scale", "action_log_prob"}.isdisjoint(stored)
-    assert set(trainer.agent.actor.out_keys) - {"action"} == {
-        "embedding", "loc", "scale", "action_log_prob"
-    }
+    if algo == "s3rl":
+        needed.add(("next", "cost"))
+    if n_step > 1:
+        needed.add("steps_to_next_obs")
+    assert stored == needed
+    # ... and none of what the collector, the transforms and the policy also write.
+    collected = set(trainer.train_env.rollout(3, trainer.agent.actor).keys(True, True))
+    assert {"embedding", "loc", "scale", "action_log_prob", ("next", "episode_reward"),
+            ("next", "step_count")} <= collected
 
 
 def test_critics_keep_their_own_initialisation(tiny_config):
