@@ -65,8 +65,8 @@ HIDDEN = (128, 128)
 
 def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
     """A batch with the entries of a replay-buffer sample of the S3RL recipe: what the losses
-    read plus the safe/unsafe label and the sampler's index, which is all the trainer stores
-    (``Trainer._keys_read_from_buffer``)."""
+    read plus the safe/unsafe label and the buffer's slot index, which is all the trainer
+    stores (``Trainer._keys_read_from_buffer``)."""
     g = torch.Generator().manual_seed(0)
     flag = torch.zeros(batch, 1, dtype=torch.bool)
     cost = (torch.rand(batch, 1, generator=g) > 0.7).float()
@@ -75,7 +75,7 @@ def make_batch(obs_dim: int, act_dim: int, batch: int = BATCH) -> TensorDict:
             "observation": torch.randn(batch, obs_dim, generator=g),
             "action": torch.rand(batch, act_dim, generator=g) * 2 - 1,
             "steps_to_next_obs": torch.full((batch,), 2, dtype=torch.long),
-            "index": torch.arange(batch),  # written by the replay buffer on sampling
+            "index": torch.arange(batch),  # stored by torchrl's TensorDict writer
             "next": {
                 "observation": torch.randn(batch, obs_dim, generator=g),
                 "reward": torch.randn(batch, 1, generator=g),

@@ -17,6 +17,7 @@ reward and cost terms of the actor loss.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -367,6 +368,11 @@ class SACLagLoss(SACLoss):
         self._critic_eval = self._resolve_critic_eval(critic_eval)
         self._set_in_keys()  # SACLoss computed them before the cost entries existed
         self._make_cost_vmap()
+        # SACLoss turns "auto" into a target-entropy buffer on first use, which may be the first
+        # state_dict (a checkpoint) after a compiled forward: the module then changes under
+        # dynamo's guards and the loss recompiles (~10 s). Settle it now when the spec allows.
+        with contextlib.suppress(RuntimeError):
+            _ = self.target_entropy  # the property registers the buffer
 
     # ------------------------------------------------------------------ configuration
     def _same_architecture(self) -> bool:

@@ -604,3 +604,16 @@ def test_fsrl_order_update_uses_the_updated_critics():
         close(loss.target_qvalue_network_params.flatten_keys()[key], value)
     assert float(loss.log_alpha.detach()) != log_alpha_before
     assert set(out.keys()) == set(loss.out_keys)
+
+
+def test_checkpointing_a_compiled_loss_does_not_recompile_it():
+    # SACLoss creates its target-entropy buffer on first use, e.g. at the first state_dict; the
+    # module then changes under dynamo's guards. SACLagLoss settles it when it is built.
+    loss, *_ = make_loss()
+    assert dict(loss.named_buffers())["_target_entropy"].item() == -ACT
+    compiled = torch.compile(loss)
+    batch = make_batch()
+    compiled(batch.copy())
+    loss.state_dict()
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        compiled(batch.copy())
