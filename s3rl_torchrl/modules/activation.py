@@ -8,9 +8,9 @@ tensor, which takes a byte per element instead of four. It does so whenever the 
 is not needed otherwise, e.g. when a critic is evaluated with detached parameters for the actor
 loss. On this machine's AVX-512 CPU (torch 2.13), inductor writes and reads bool tensors one
 lane at a time through a generic 64-lane vector. Storing the mask of one ``[4, 256, 128]``
-critic activation then costs ~1.1 ms against ~0.05 ms eager. The backward of a 3-layer critic
-ensemble (input gradient only) took 4.7-5.1 ms compiled against 1.3 ms eager
-(``docs/objectives.md``).
+critic activation then costs ~1.1 ms against ~0.05 ms eager, and the forward and input-gradient
+backward of a 3-layer critic ensemble 4.4 ms compiled against 1.2 ms eager; 1.1 ms with this
+ReLU (``benchmarks/relu_mask.py``, ``docs/objectives.md``).
 
 ``sign(output)`` is computed from a float tensor that the backward saves anyway, so no bool
 tensor crosses a kernel boundary. The gradient is the same as ``torch.relu``'s: ``grad`` where

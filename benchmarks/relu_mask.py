@@ -1,0 +1,103 @@
+"""Why the package has its own ReLU: compiled ``torch.relu`` against ``s3rl_torchrl.modules.relu``.
+
+    python benchmarks/relu_mask.py [--calls 200] [--rounds 5] \
+        [--out benchmarks/results/relu_mask.json]
+
+Two measurements, one thread, microseconds per call, median over interleaved rounds:
+
+- ``mask``: storing the bool tensor ``x <= 0`` of one ``[4, 256, 128]`` activation (the shape of
+  the four stacked critics' hidden layer), eager and compiled.
+- ``critic_backward``: forward and input-gradient backward of a 3-layer ReLU ensemble of four
+  critics (23 -> 128 -> 128 -> 1, batch 256, weights frozen as in the actor loss), eager
+  and compiled, with ``torch.relu`` and with the package's ``relu``. With frozen weights the
+  backward of ``torch.relu`` needs only the mask, which AOT autograd saves as bool.
+
+Results: ``docs/objectives.md`` (compile notes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import torch
+from _report import command_line, machine, write_report
+
+from s3rl_torchrl.modules import relu
+
+NETS, BATCH, IN, HIDDEN = 4, 256, 23, 128
+
+
+def mask(x: torch.Tensor) -> torch.Tensor:
+    return x <= 0
+
+
+def make_critic_step(act):
+    g = torch.Generator().manual_seed(0)
+    shapes = [(IN, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 1)]
+    weights = [torch.randn(NETS, a, b, generator=g) / a**0.5 for a, b in shapes]
+    biases = [torch.zeros(NETS, 1, b) for _, b in shapes]
+    action = torch.randn(NETS, BATCH, IN, generator=g, requires_grad=True)
+
+    def forward(x):
+        for i, (w, b) in enumerate(zip(weights, biases)):
+            x = torch.baddbmm(b, x, w)
+            if i < len(weights) - 1:
+                x = act(x)
+        return x.mean()
+
+    return forward, action
+
+
+def timed(fn, calls: int) -> float:
+    start = time.perf_counter()
+    for _ in range(calls):
+        fn()
+    return (time.perf_counter() - start) / calls * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calls", type=int, default=200)
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/relu_mask.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    x = torch.randn(NETS, BATCH, HIDDEN)
+    compiled_mask = torch.compile(mask)
+    cases = {"mask eager": lambda: mask(x), "mask compiled": lambda: compiled_mask(x)}
+    for name, act in (("torch.relu", torch.relu), ("s3rl relu", relu)):
+        for mode in ("eager", "compiled"):
+            forward, action = make_critic_step(act)
+            if mode == "compiled":
+                forward = torch.compile(forward)
+
+            def step(forward=forward, action=action):
+                forward(action).backward()
+                action.grad = None
+
+            cases[f"critic_backward {name} {mode}"] = step
+    for fn in cases.values():  # compile and warm up
+        for _ in range(5):
+            fn()
+    rounds = {name: [] for name in cases}
+    for _ in range(args.rounds):
+        for name, fn in cases.items():
+            rounds[name].append(timed(fn, args.calls))
+    rows = {
+        name: {"us": round(statistics.median(values), 1), "rounds": [round(v, 1) for v in values]}
+        for name, values in rounds.items()
+    }
+    for name, row in rows.items():
+        print(f"{name:40s} {row['us']:9.1f} us")
+    write_report(
+        args.out,
+        {"command": command_line(), "machine": machine(), "threads": 1, "results": rows},
+    )
+
+
+if __name__ == "__main__":
+    main()
