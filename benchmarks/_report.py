@@ -1,10 +1,13 @@
-"""What every benchmark script writes: its results as JSON, with the command that made them."""
+"""What every benchmark script shares: interleaved timing rounds, and its results as JSON with
+the command that made them."""
 
 from __future__ import annotations
 
 import json
 import platform
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -19,7 +22,27 @@ def machine() -> dict[str, str]:
     return {"platform": platform.platform(), "torch": torch.__version__}
 
 
+def interleaved_rounds(
+    cases: dict[str, Callable[[], object]], calls: int, rounds: int, warmup: int
+) -> dict[str, list[float]]:
+    """Microseconds per call of every case, one value per round. Each round times every case in
+    turn, so that load from other processes hits them all alike."""
+    for fn in cases.values():
+        for _ in range(warmup):
+            fn()
+    times: dict[str, list[float]] = {name: [] for name in cases}
+    for _ in range(rounds):
+        for name, fn in cases.items():
+            start = time.perf_counter()
+            for _ in range(calls):
+                fn()
+            times[name].append((time.perf_counter() - start) / calls * 1e6)
+    return times
+
+
 def write_report(path: Path, report: dict) -> None:
+    """Write ``report`` as JSON, with the command and machine unless it gives its own."""
+    report = {"command": command_line(), "machine": machine(), **report}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=2) + "\n")
     print(f"wrote {path}")

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
-from _report import command_line, machine, write_report
+from _report import write_report
 
 OBS, ACT, HIDDEN, BATCH, NETS = 17, 6, 128, 256, 4
 
@@ -148,9 +148,7 @@ def main() -> None:
             row = pool.apply(measure, (threads, args.steps, args.rounds))
         print(json.dumps(row), flush=True)
         rows.append(row)
-    write_report(
-        args.out, {"command": command_line(), "machine": machine(), "rows": rows}
-    )
+    write_report(args.out, {"rows": rows})
 
 
 if __name__ == "__main__":

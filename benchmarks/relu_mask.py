@@ -19,11 +19,10 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 from pathlib import Path
 
 import torch
-from _report import command_line, machine, write_report
+from _report import interleaved_rounds, write_report
 
 from s3rl_torchrl.modules import relu
 
@@ -51,13 +50,6 @@ def make_critic_step(act):
     return forward, action
 
 
-def timed(fn, calls: int) -> float:
-    start = time.perf_counter()
-    for _ in range(calls):
-        fn()
-    return (time.perf_counter() - start) / calls * 1e6
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=200)
@@ -80,23 +72,15 @@ def main() -> None:
                 action.grad = None
 
             cases[f"critic_backward {name} {mode}"] = step
-    for fn in cases.values():  # compile and warm up
-        for _ in range(5):
-            fn()
-    rounds = {name: [] for name in cases}
-    for _ in range(args.rounds):
-        for name, fn in cases.items():
-            rounds[name].append(timed(fn, args.calls))
+    # The warm-up calls also compile.
+    rounds = interleaved_rounds(cases, args.calls, args.rounds, warmup=5)
     rows = {
         name: {"us": round(statistics.median(values), 1), "rounds": [round(v, 1) for v in values]}
         for name, values in rounds.items()
     }
     for name, row in rows.items():
         print(f"{name:40s} {row['us']:9.1f} us")
-    write_report(
-        args.out,
-        {"command": command_line(), "machine": machine(), "threads": 1, "results": rows},
-    )
+    write_report(args.out, {"threads": 1, "results": rows})
 
 
 if __name__ == "__main__":

@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
 from pathlib import Path
 
 import torch
-from _report import command_line, machine, write_report
+from _report import interleaved_rounds, write_report
 from loss_step import ENVS, make_loss
 from torchrl.objectives import SoftUpdate
 
@@ -35,25 +34,19 @@ def main() -> None:
         "SoftUpdate": SoftUpdate(loss, tau=0.05),
         "ForeachSoftUpdate": ForeachSoftUpdate(loss, tau=0.05),
     }
-    times = {name: [] for name in updaters}
-    for updater in updaters.values():
-        for _ in range(100):
-            updater.step()
-    for _ in range(args.rounds):
-        for name, updater in updaters.items():
-            start = time.perf_counter()
-            for _ in range(args.calls):
-                updater.step()
-            times[name].append((time.perf_counter() - start) / args.calls * 1e6)
+    times = interleaved_rounds(
+        {name: updater.step for name, updater in updaters.items()},
+        args.calls,
+        args.rounds,
+        warmup=100,
+    )
     rows = {
         name: {"us_per_step": round(statistics.median(t), 1), "rounds": [round(x, 1) for x in t]}
         for name, t in times.items()
     }
     for name, row in rows.items():
         print(f"{name:18s} {row['us_per_step']:8.1f} us per step")
-    write_report(
-        args.out, {"command": command_line(), "machine": machine(), "results": rows}
-    )
+    write_report(args.out, {"results": rows})
 
 
 if __name__ == "__main__":

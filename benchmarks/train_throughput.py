@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import command_line, machine, write_report
+from _report import write_report
 from hydra import compose, initialize_config_dir
 
 from s3rl_torchrl.trainer import Trainer, register_configs, validate
@@ -85,9 +85,7 @@ def main() -> None:
         row = measure(args.task, args.frames, mode == "compiled", args.threads)
         print(json.dumps(row), flush=True)
         rows.append(row)
-    write_report(
-        args.out, {"command": command_line(), "machine": machine(), "rows": rows}
-    )
+    write_report(args.out, {"rows": rows})
 
 
 if __name__ == "__main__":
