@@ -2,6 +2,7 @@
 and Safety-Gymnasium Circle tasks, all through one registry and :func:`make_env`."""
 
 from s3rl_torchrl.envs.bullet import BULLET_TASKS, register_bullet_tasks
+from s3rl_torchrl.envs.circle import CIRCLE_TASKS, register_circle_tasks
 from s3rl_torchrl.envs.make import BATCHING_CHOICES, make_base_env, make_env, require_task_module
 from s3rl_torchrl.envs.registry import (
     TASKS,
@@ -19,10 +20,12 @@ from s3rl_torchrl.envs.velocity import register_velocity_tasks, velocity_cost
 # Gymnasium registration, one call per family (none imports an optional package).
 register_velocity_tasks()
 register_bullet_tasks()
+register_circle_tasks()
 
 __all__ = [
     "BATCHING_CHOICES",
     "BULLET_TASKS",
+    "CIRCLE_TASKS",
     "TASKS",
     "VELOCITY_REGISTRATIONS",
     "VELOCITY_SPECS",
@@ -34,6 +37,7 @@ __all__ = [
     "make_base_env",
     "make_env",
     "register_bullet_tasks",
+    "register_circle_tasks",
     "register_velocity_tasks",
     "require_task_module",
     "task_names",

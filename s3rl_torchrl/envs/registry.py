@@ -21,11 +21,11 @@ from dataclasses import dataclass
 from typing import Literal
 
 from s3rl_torchrl.envs.bullet import BULLET_TASKS
+from s3rl_torchrl.envs.circle import CIRCLE_TASKS
 from s3rl_torchrl.envs.spec import TaskSpec
 
 # Each family's module defines its TaskSpec tuple (and registers its ids with Gymnasium in
 # s3rl_torchrl/envs/__init__.py); a new family adds its import here and its tuple in TASKS.
-# Circle family: import CIRCLE_TASKS from s3rl_torchrl.envs.circle here, add it to TASKS below.
 
 SpeedKind = Literal["x", "xy"]
 MujocoVersion = Literal["v4", "v5"]
@@ -152,7 +152,7 @@ def _collect(*families: Iterable[TaskSpec]) -> dict[str, TaskSpec]:
 
 
 #: Every task id this package knows, mapped to its spec.
-TASKS: dict[str, TaskSpec] = _collect(VELOCITY_SPECS, BULLET_TASKS)  # + CIRCLE_TASKS
+TASKS: dict[str, TaskSpec] = _collect(VELOCITY_SPECS, BULLET_TASKS, CIRCLE_TASKS)
 
 
 def task_names(
