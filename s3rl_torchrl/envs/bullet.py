@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -41,6 +42,7 @@ from s3rl_torchrl.envs.spec import TaskSpec
 
 BULLET_SOURCE = "bullet-safety-gym 1.4.0"
 BULLET_MODULE = "bullet_safety_gym"
+BULLET_ENV_MODULE = "bullet_safety_gym.envs.builder"
 NAMESPACE = "s3rl_torchrl"
 
 
@@ -85,10 +87,10 @@ def _process_std_streams() -> Iterator[None]:
 
 
 def import_bullet_safety_gym():
-    """Import the upstream package (which registers its ids with Gymnasium)."""
-    if BULLET_MODULE not in sys.modules:
+    """Import the upstream package (it registers its ids) and its env module (needs pybullet)."""
+    if BULLET_ENV_MODULE not in sys.modules:
         with _process_std_streams():
-            importlib.import_module(BULLET_MODULE)
+            importlib.import_module(BULLET_ENV_MODULE)
     return sys.modules[BULLET_MODULE]
 
 
@@ -99,7 +101,9 @@ def make_bullet_env(*, upstream_id: str, **kwargs: Any) -> gym.Env:
     """
     import_bullet_safety_gym()
     upstream = gym.spec(upstream_id)
-    with _process_std_streams():
+    with _process_std_streams(), warnings.catch_warnings():
+        # Its float32 observation bounds in a float64 Box: NumPy warns casting the dtype limits.
+        warnings.filterwarnings("ignore", "overflow encountered in cast", RuntimeWarning)
         env = load_env_creator(upstream.entry_point)(**{**upstream.kwargs, **kwargs})
     return NumpyGlobalSeeding(env)
 
