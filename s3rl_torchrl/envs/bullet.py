@@ -88,7 +88,7 @@ def _process_std_streams() -> Iterator[None]:
 
 def import_bullet_safety_gym():
     """Import the upstream package (it registers its ids) and its env module (needs pybullet)."""
-    if BULLET_ENV_MODULE not in sys.modules:
+    if sys.modules.get(BULLET_ENV_MODULE) is None:
         with _process_std_streams():
             importlib.import_module(BULLET_ENV_MODULE)
     return sys.modules[BULLET_MODULE]
