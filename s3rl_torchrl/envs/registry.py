@@ -182,3 +182,65 @@ def get_task(name: str) -> TaskSpec:
         raise ValueError(
             f"Unknown task {name!r}. Valid tasks are: {', '.join(task_names())}."
         ) from None
+
+
+#: The task ids the S3RL paper evaluates (Table 1; ``SafetyDroneCircle-v0`` is in §4's text and
+#: Figure 2). Table 1's ``SafetyPointGoal1Gymnasium-v0`` (a Goal task) is not built here.
+PAPER_TASK_IDS: tuple[str, ...] = (
+    "SafetyHalfCheetahVelocityGymnasium-v1",
+    "SafetyHopperVelocityGymnasium-v1",
+    "SafetySwimmerVelocityGymnasium-v1",
+    "SafetyWalker2dVelocityGymnasium-v1",
+    "SafetyAntVelocityGymnasium-v1",
+    "SafetyHumanoidVelocityGymnasium-v1",
+    "SafetyBallRun-v0",
+    "SafetyCarRun-v0",
+    "SafetyDroneRun-v0",
+    "SafetyAntRun-v0",
+    "SafetyBallCircle-v0",
+    "SafetyCarCircle-v0",
+    "SafetyDroneCircle-v0",
+    "SafetyAntCircle-v0",
+    "SafetyPointCircle1Gymnasium-v0",
+    "SafetyCarCircle1Gymnasium-v0",
+)
+
+
+FAMILY_ORDER = {"velocity": 0, "bullet": 1, "circle": 2}
+
+
+def tasks_markdown_table() -> str:
+    """The table of every task in ``docs/tasks.md`` (a test keeps the docs equal to it).
+
+    One row per main id (aliases in the second column), paper tasks first, then the other
+    tasks and the opt-in variants. Print it with ``python -c "from s3rl_torchrl.envs.registry
+    import tasks_markdown_table; print(tasks_markdown_table())"``.
+    """
+    aliases: dict[str, list[str]] = {}
+    for spec in TASKS.values():
+        if spec.alias_of is not None:
+            aliases.setdefault(spec.alias_of, []).append(spec.env_id)
+
+    def paper_id(name: str) -> str | None:
+        return next((i for i in (name, *aliases.get(name, ())) if i in PAPER_TASK_IDS), None)
+
+    def order(spec: TaskSpec):
+        in_paper = paper_id(spec.env_id) is not None
+        return (not in_paper, spec.variant_of is not None, FAMILY_ORDER[spec.family], spec.env_id)
+
+    lines = [
+        "| task id | also registered as | paper | source | obs | act | episode length "
+        "| cost per step | cost limit |",
+        "|---|---|---|---|---:|---:|---:|---|---:|",
+    ]
+    for spec in sorted((s for s in TASKS.values() if s.alias_of is None), key=order):
+        also = ", ".join(f"`{a}`" for a in sorted(aliases.get(spec.env_id, ())))
+        paper = "yes" if paper_id(spec.env_id) else ""
+        extra = f" (extra `{spec.extra}`)" if spec.extra else ""
+        rule = spec.cost_rule.replace("|", "\\|")  # a bare | would split the table cell
+        lines.append(
+            f"| `{spec.env_id}` | {also} | {paper} | {spec.source}{extra} | {spec.obs_dim} "
+            f"| {spec.act_dim} | {spec.max_episode_steps} | `{rule}` "
+            f"| {spec.cost_limit:g} |"
+        )
+    return "\n".join(lines)

@@ -8,7 +8,7 @@ from tensordict.nn import TensorDictModule
 from torchrl.envs import DoubleToFloat, GymEnv, TransformedEnv, default_info_dict_reader
 from torchrl.envs.utils import check_env_specs
 
-from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, make_env, task_names
+from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, get_task, make_env, task_names
 
 
 # Every task of every family, v5 variants included (aliases build the same envs).
@@ -16,6 +16,9 @@ from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, make_env, task_names
 def test_check_env_specs(task):
     env = make_env(task, seed=0)
     check_env_specs(env, seed=0)
+    spec = get_task(task)  # the registry's sizes are the built env's
+    assert env.observation_spec["observation"].shape == (spec.obs_dim,)
+    assert env.action_spec.shape == (spec.act_dim,)
     env.close()
 
 
