@@ -72,15 +72,25 @@ def test_tiny_training_run(task, tiny_config, tmp_path):
     assert saved["task"] == {"name": task, "cost_limit": spec.cost_limit}
 
 
-def test_s3rl_train_cli_on_a_bullet_task(tmp_path):
-    run_dir = tmp_path / "run"
-    out = subprocess.run(
-        [str(BIN / "s3rl-train"), "task=SafetyBallRun-v0", "experiment=tiny",
-         "collector.total_frames=200", "collector.frames_per_epoch=200",
-         f"hydra.run.dir={run_dir}"],
-        cwd=tmp_path, env={**os.environ, "HYDRA_FULL_ERROR": "0"},
+def _run(script: str, *args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [str(BIN / script), *args], cwd=cwd, env={**os.environ, "HYDRA_FULL_ERROR": "0"},
         capture_output=True, text=True, timeout=600,
     )
+
+
+def test_s3rl_train_and_eval_cli_on_a_bullet_task(tmp_path):
+    run_dir, eval_dir = tmp_path / "run", tmp_path / "eval"
+    out = _run("s3rl-train", "task=SafetyBallRun-v0", "experiment=tiny",
+               "collector.total_frames=200", "collector.frames_per_epoch=200",
+               f"hydra.run.dir={run_dir}", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "| run | episodes | reward | cost | length | safe steps (%) |" in out.stdout
     assert json.loads((run_dir / "final_eval.json").read_text())["episodes"] == 2
+    # s3rl-eval without max_steps rolls out whole episodes: the Ball never terminates, so
+    # every episode lasts the 100-step time limit.
+    out = _run("s3rl-eval", f"checkpoint={run_dir}", "episodes=2", "num_envs=1",
+               f"hydra.run.dir={eval_dir}", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    result = json.loads((eval_dir / "eval.json").read_text())
+    assert result["episodes"] == 2 and result["length_mean"] == 100.0
