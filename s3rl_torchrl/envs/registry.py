@@ -91,8 +91,7 @@ VELOCITY_TASKS: tuple[VelocityTask, ...] = (
 )
 
 MAX_EPISODE_STEPS = 1000
-#: Default per-episode cost limit of every task: the paper's Table 3 (``cost_limit`` = 10),
-#: also FSRL's default.
+#: Default per-episode cost limit of every task: the paper's Table 3 (``cost_limit`` = 10).
 PAPER_COST_LIMIT = 10.0
 
 
