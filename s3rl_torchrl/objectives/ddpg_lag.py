@@ -335,13 +335,14 @@ def make_ddpg_lag_optimizers(
     for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
         if not lr > 0:
             raise ValueError(f"{name} must be > 0, got {lr!r}.")
-    critic_params = list(loss.value_network_params.values(True, True))
+    def trainable(params) -> list[Tensor]:  # skip buffers (e.g. the actor's action bounds)
+        return [p for p in params.values(True, True) if p.requires_grad]
+
+    critic_params = trainable(loss.value_network_params)
     if isinstance(loss, DDPGLagLoss):
-        critic_params += list(loss.cost_value_network_params.values(True, True))
+        critic_params += trainable(loss.cost_value_network_params)
     return DDPGLagOptimizers(
-        actor=torch.optim.Adam(
-            list(loss.actor_network_params.values(True, True)), lr=actor_lr, **adam_kwargs
-        ),
+        actor=torch.optim.Adam(trainable(loss.actor_network_params), lr=actor_lr, **adam_kwargs),
         critic=torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
     )
 
