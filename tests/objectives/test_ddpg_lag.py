@@ -302,3 +302,33 @@ def test_contrastive_phase_plugs_into_the_ddpg_actor_unchanged():
     assert not math.isclose(loss(make_batch())["loss_actor"].item(), loss_before)
     for p in (*critic.parameters(), *cost_critic.parameters()):
         assert p.grad is None
+
+
+def test_deterministic_actor_formula_and_init():
+    actor = make_nets()[0]
+    encoder = get_policy_encoder(actor)
+    linears = [m for m in actor.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(linears) == len(HIDDEN) + 1
+    for layer in linears:  # orthogonal weights (gain 1), zero biases
+        w = layer.weight.detach()
+        small = w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
+        torch.testing.assert_close(small, torch.eye(small.shape[0]), atol=1e-5, rtol=0)
+        assert not layer.bias.detach().any()
+    spec = action_spec()
+    low, high = spec.space.low, spec.space.high
+    obs = torch.randn(8, OBS, generator=torch.Generator().manual_seed(3))
+    with torch.no_grad():
+        z = obs
+        for layer in linears[:-1]:
+            z = torch.relu(layer(z))
+        expected = low + (torch.tanh(linears[-1](z)) + 1) * (high - low) / 2
+        td = actor(TensorDict(observation=obs, batch_size=[8]))
+    torch.testing.assert_close(td["embedding"], z)
+    torch.testing.assert_close(td["action"], expected)
+    assert {id(p) for p in encoder.parameters()} == {id(p) for p in linears[0].parameters()} | {
+        id(p) for p in linears[1].parameters()
+    }
+    with pytest.raises(ValueError, match="hidden"):
+        build_deterministic_actor(OBS, spec, ())
+    with pytest.raises(ValueError, match="sigma"):
+        build_ddpg_exploration(actor, spec, sigma=-0.1)
