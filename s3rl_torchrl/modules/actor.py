@@ -92,15 +92,15 @@ class DeterministicHead(nn.Module):
         return self.loc + self.half_range * torch.tanh(self.linear(embedding))
 
 
-def _unbatched_action_spec(action_spec: TensorSpec) -> Bounded:
+def _unbatched_action_spec(action_spec: TensorSpec, caller: str = "build_s3rl_actor") -> Bounded:
     """The per-env action spec: a batched env's spec repeats it along the leading dims."""
     if not isinstance(action_spec, Bounded):
         raise TypeError(
-            "build_s3rl_actor: action_spec must be a bounded continuous spec "
+            f"{caller}: action_spec must be a bounded continuous spec "
             f"(torchrl.data.Bounded, e.g. env.action_spec), got {type(action_spec).__name__}."
         )
     if action_spec.ndim == 0:
-        raise ValueError("build_s3rl_actor: action_spec must have an action dimension.")
+        raise ValueError(f"{caller}: action_spec must have an action dimension.")
     single = action_spec[(0,) * (action_spec.ndim - 1)] if action_spec.ndim > 1 else action_spec
     low, high = single.space.low, single.space.high
     batched_low = action_spec.space.low.reshape(-1, low.shape[-1])
@@ -110,12 +110,12 @@ def _unbatched_action_spec(action_spec: TensorSpec) -> Bounded:
         and torch.equal(batched_high, high.expand_as(batched_high))
     ):
         raise ValueError(
-            "build_s3rl_actor: the batched action_spec has different bounds per env; pass the "
+            f"{caller}: the batched action_spec has different bounds per env; pass the "
             "spec of one env."
         )
     if not torch.all(high > low):
         raise ValueError(
-            f"build_s3rl_actor: action_spec needs high > low everywhere, got low={low.tolist()}, "
+            f"{caller}: action_spec needs high > low everywhere, got low={low.tolist()}, "
             f"high={high.tolist()}."
         )
     return single
@@ -231,7 +231,7 @@ def build_deterministic_actor(
     :class:`~s3rl_torchrl.objectives.DDPGLagLoss` as is; collect with
     :func:`build_ddpg_exploration` around it.
     """
-    action_spec = _unbatched_action_spec(action_spec)
+    action_spec = _unbatched_action_spec(action_spec, "build_deterministic_actor")
     low, high = action_spec.space.low, action_spec.space.high
     encoder, hidden = _policy_encoder(
         observation_dim, hidden, activation, observation_key, embedding_key
@@ -270,7 +270,7 @@ def build_ddpg_exploration(
     sigma = float(sigma)
     if not sigma >= 0:
         raise ValueError(f"sigma must be >= 0, got {sigma!r}.")
-    single = _unbatched_action_spec(action_spec)
+    single = _unbatched_action_spec(action_spec, "build_ddpg_exploration")
     noise = AdditiveGaussianModule(
         single,
         sigma_init=sigma,
