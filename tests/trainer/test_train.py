@@ -254,3 +254,41 @@ def test_new_run_into_an_existing_run_dir_is_refused(tiny_config, tmp_path):
     with pytest.raises(FileExistsError, match="resume="):
         train(tiny_config("algo=sac_lag", "collector.total_frames=200"), tmp_path)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+
+
+def test_run_shorter_than_an_epoch_leaves_a_loadable_checkpoint(tiny_config, tmp_path, capsys):
+    # 300 frames, epochs of 400: the run's end closes a shorter last epoch (a metrics row and
+    # the final checkpoint), whatever the epoch length.
+    from s3rl_torchrl.trainer.evaluate_checkpoint import evaluate_checkpoint
+
+    cfg = tiny_config("algo=sac_lag", "collector.total_frames=300",
+                      "collector.frames_per_epoch=400")
+    result = train(cfg, tmp_path)
+    assert result.counters.epochs == 1
+    assert result.counters.grad_steps == expected_grad_steps(cfg) == 50
+    (row,) = read_metrics(tmp_path)
+    assert (row["frames"], row["epoch"], row["grad_steps"]) == ("300", "1", "50")
+    assert (tmp_path / "checkpoints" / "latest" / "state.pt").is_file()
+    # The final table says how much the policy was trained.
+    out = capsys.readouterr().out
+    assert "| gradient steps |" in out and "seed 10 | 2 |" in out and " | 50 |" in out
+
+    evaluated, train_cfg = evaluate_checkpoint(tmp_path, episodes=1, num_envs=1, max_steps=10)
+    assert evaluated.episodes == 1 and evaluated.length_mean == 10.0
+    assert train_cfg.collector.total_frames == 300
+
+
+def test_last_partial_epoch_is_logged_and_saved(tiny_config, tmp_path):
+    # 500 frames in epochs of 200: rows at 200, 400 and the run's end (500); the last
+    # checkpoint holds the finished run (resuming it only evaluates).
+    # Batches of 400: the 2-step transform holds back 2 frames per env copy, so the buffer
+    # holds 2 x (50 k - 2) transitions after k batches, >= 400 only after the 5th: 25 steps.
+    cfg = tiny_config("algo=sac", "collector.total_frames=500", "save_interval=5",
+                      "algo.batch_size=400")
+    first = train(cfg, tmp_path)
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "500"]
+    assert first.counters.epochs == 3 and first.counters.grad_steps == 25
+    cfg.resume = str(tmp_path)
+    again = train(cfg, tmp_path / "ignored")
+    assert _counters(again) == _counters(first)
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "500"]
