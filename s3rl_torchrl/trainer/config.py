@@ -261,13 +261,13 @@ class LoggerConfig:
 
 def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> None:
     """Refuse a run that would evaluate an untrained policy as if it were trained."""
-    if planned_gradient_steps(collector, algo) > 0:
+    if planned_gradient_steps(collector, algo, stop_at=1) > 0:
         return
     batch = collector_batch_frames(collector)
 
     def learns(**changes: int) -> bool:
         changed = CollectorConfig(**{**vars(collector), **changes})
-        return planned_gradient_steps(changed, algo) > 0
+        return planned_gradient_steps(changed, algo, stop_at=1) > 0
 
     options = []
     # The fewest whole batches that learn with the other values unchanged. Bounded: once past

@@ -43,8 +43,11 @@ def stored_transitions(batches: int, collector: CollectorConfig, algo: AlgoConfi
     return min(algo.buffer_size, collector.num_envs * max(0, steps_per_env - held_back))
 
 
-def planned_gradient_steps(collector: CollectorConfig, algo: AlgoConfig) -> int:
-    """The number of gradient steps a run of this config takes (collector and algo settings)."""
+def planned_gradient_steps(
+    collector: CollectorConfig, algo: AlgoConfig, stop_at: int | None = None
+) -> int:
+    """The number of gradient steps a run of this config takes (collector and algo settings);
+    with ``stop_at``, counting stops once that many are reached."""
     batch_frames = collector_batch_frames(collector)
     batches = math.ceil(collector.total_frames / batch_frames)
     pending, steps = 0.0, 0
@@ -55,4 +58,6 @@ def planned_gradient_steps(collector: CollectorConfig, algo: AlgoConfig) -> int:
         whole = math.floor(pending)
         steps += whole
         pending -= whole
+        if stop_at is not None and steps >= stop_at:
+            break
     return steps
