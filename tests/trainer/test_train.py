@@ -77,6 +77,7 @@ def _counters(result):
     return c
 
 
+@pytest.mark.slow
 def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
     cfg = tiny_config("algo=s3rl", "task=SafetySwimmerVelocity-v1")
     full = train(cfg, tmp_path / "full")
@@ -97,6 +98,7 @@ def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
     assert (tmp_path / "part" / "final_eval.json").is_file()
 
 
+@pytest.mark.slow
 def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, monkeypatch):
     cfg = tiny_config("algo=sac_lag")
     full = train(cfg, tmp_path / "full")
@@ -120,6 +122,7 @@ def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, m
     assert [r["frames"] for r in read_metrics(tmp_path / "part")] == ["200", "400", "600"]
 
 
+@pytest.mark.slow
 def test_crash_after_checkpoint_drops_unsaved_metric_rows(tiny_config, tmp_path):
     cfg = tiny_config("algo=sac", "collector.total_frames=800", "save_interval=2")
 
@@ -172,6 +175,7 @@ def test_resuming_a_finished_run_only_evaluates(tiny_config, tmp_path):
     assert [r["frames"] for r in read_metrics(tmp_path)] == ["200"]
 
 
+@pytest.mark.slow
 def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
     cfg = tiny_config("algo=s3rl", "algo.update_order=fsrl", "task=SafetySwimmerVelocity-v1")
     result = train(cfg, tmp_path)
@@ -179,6 +183,7 @@ def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
     assert all(r["train/loss_actor"] != "nan" for r in read_metrics(tmp_path))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("update_order", ["joint", "fsrl"])
 def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp_path):
     # compile=true: the loss (joint) or its two halves (fsrl) go through torch.compile.
@@ -206,6 +211,7 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         assert torch.isfinite(torch.tensor(float(row[key])))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1)])
 def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_path):
     cfg = tiny_config(f"algo={algo}", f"algo.n_step={n_step}", "collector.total_frames=300")
