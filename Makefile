@@ -1,6 +1,7 @@
 # Two entry points do all set-up on a fresh machine (Python >= 3.10 and nothing else):
 #   make train   -> creates .venv on first use, then runs the main job
 #   make test    -> creates .venv on first use, then lints and runs the test suite
+#   (make test-fast: the same without the slow end-to-end tests)
 # Override the torch build with e.g.  make test TORCH_SPEC="torch==2.13.0+cu128"
 PYTHON ?= python3
 VENV ?= .venv
@@ -13,7 +14,10 @@ EXTRAS ?= dev
 BULLET_SPEC ?= bullet-safety-gym==1.4.0
 STAMP := $(VENV)/.installed-$(EXTRAS)
 
-.PHONY: setup train test lint bench clean
+# pytest-xdist workers for make test / test-fast (0: one process).
+WORKERS ?= 2
+
+.PHONY: setup train test test-fast lint bench clean
 
 $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -37,8 +41,12 @@ train: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check s3rl_torchrl recipes tests benchmarks
 
+# Every test (CI runs this); test-fast leaves out the ones marked slow (end-to-end runs).
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q $(ARGS)
+	$(BIN)/python -m pytest -q -n $(WORKERS) $(ARGS)
+
+test-fast: $(STAMP) lint
+	$(BIN)/python -m pytest -q -n $(WORKERS) -m "not slow" $(ARGS)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_throughput.py

@@ -21,9 +21,10 @@ from pathlib import Path
 from _report import write_report
 from hydra import compose, initialize_config_dir
 
+from s3rl_torchrl.recipes import config_dir
 from s3rl_torchrl.trainer import Trainer, register_configs, validate
 
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
+CONFIG_DIR = str(config_dir())
 
 
 def measure(task: str, frames: int, compiled: bool, threads: int) -> dict:

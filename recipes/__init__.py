@@ -1,1 +1,1 @@
-"""Hydra entry points (thin): ``s3rl-train`` and ``s3rl-eval``."""
+"""Thin wrappers of the Hydra recipes in :mod:`s3rl_torchrl.recipes` (not installed)."""

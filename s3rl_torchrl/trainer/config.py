@@ -9,6 +9,7 @@ anything, so a bad override fails with the field's name and what it accepts.
 from __future__ import annotations
 
 import importlib.util
+import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
 
@@ -16,6 +17,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
+from s3rl_torchrl.trainer.schedule import collector_batch_frames, planned_gradient_steps
 
 ALGO_NAMES = ("s3rl", "sac_lag", "sac", "s3rl_nolag")
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
@@ -268,6 +270,44 @@ class LoggerConfig:
             )
 
 
+def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> None:
+    """Refuse a run that would evaluate an untrained policy as if it were trained."""
+    if planned_gradient_steps(collector, algo, stop_at=1) > 0:
+        return
+    batch = collector_batch_frames(collector)
+
+    def learns(**changes: int) -> bool:
+        changed = CollectorConfig(**{**vars(collector), **changes})
+        return planned_gradient_steps(changed, algo, stop_at=1) > 0
+
+    options = []
+    # The fewest whole batches that learn with the other values unchanged. Bounded: once past
+    # init_random_frames and batch_size stored transitions (n-step holds back n_step frames
+    # per env), every batch owes update_per_step * batch steps.
+    start = max(collector.init_random_frames, algo.batch_size + algo.n_step * collector.num_envs)
+    limit = start + batch * (1 + math.ceil(1.0 / (algo.update_per_step * batch)))
+    total = next(
+        (n for n in range(batch, limit + batch, batch) if learns(total_frames=n)), None
+    )
+    if total is not None:
+        options.append(f"raise {prefix}collector.total_frames to {total} or more")
+    last_batch_end = math.ceil(collector.total_frames / batch) * batch
+    if learns(init_random_frames=last_batch_end):
+        options.append(
+            f"lower {prefix}collector.init_random_frames to {last_batch_end} or less"
+        )
+    _fail(
+        prefix + "collector.total_frames",
+        collector.total_frames,
+        "no gradient step would happen: learning starts with the first batch "
+        f"({batch} frames) that ends at or after {prefix}collector.init_random_frames "
+        f"({collector.init_random_frames}) and leaves at least {prefix}algo.batch_size "
+        f"({algo.batch_size}) transitions in the replay buffer, then takes "
+        f"{prefix}algo.update_per_step ({algo.update_per_step}) steps per frame; "
+        + ", or ".join(options or ["change these values"]),
+    )
+
+
 @dataclass
 class TrainConfig:
     """A whole training run (``s3rl-train``)."""
@@ -304,6 +344,7 @@ class TrainConfig:
                 f"must be a multiple of collector.frames_per_batch "
                 f"({self.collector.frames_per_batch})",
             )
+        _check_learns(self.collector, self.algo, prefix)
 
 
 @dataclass

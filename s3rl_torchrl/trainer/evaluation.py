@@ -110,20 +110,31 @@ class RandomPolicy:
         return self.env.rand_action(tensordict)
 
 
-def format_table(rows: dict[str, EvalResult], title: str = "Final evaluation") -> str:
-    """A Markdown table of evaluation results, one row per label."""
-    lines = [
-        f"{title}",
-        "",
-        "| run | episodes | reward | cost | length | safe steps (%) |",
-        "|---|---:|---:|---:|---:|---:|",
-    ]
+def format_table(
+    rows: dict[str, EvalResult],
+    title: str = "Final evaluation",
+    grad_steps: dict[str, int] | None = None,
+) -> str:
+    """A Markdown table of evaluation results, one row per label.
+
+    ``grad_steps`` (label -> gradient steps the policy was trained with) adds a column, so a
+    policy that never learned shows it; labels without an entry (a random baseline) get "-".
+    """
+    header = "| run | episodes | reward | cost | length | safe steps (%) |"
+    rule = "|---|---:|---:|---:|---:|---:|"
+    if grad_steps is not None:
+        header += " gradient steps |"
+        rule += "---:|"
+    lines = [f"{title}", "", header, rule]
     for label, r in rows.items():
-        lines.append(
+        line = (
             f"| {label} | {r.episodes} | {r.reward_mean:.2f} ± {r.reward_std:.2f} | "
             f"{r.cost_mean:.2f} ± {r.cost_std:.2f} | {r.length_mean:.1f} | "
             f"{r.safe_occupancy:.1f} |"
         )
+        if grad_steps is not None:
+            line += f" {grad_steps.get(label, '-')} |"
+        lines.append(line)
     return "\n".join(lines)
 
 

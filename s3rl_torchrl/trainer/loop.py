@@ -18,6 +18,7 @@ first, so the resumed run ends with the same counters as an uninterrupted one.
 from __future__ import annotations
 
 import json
+import math
 import random
 import signal
 import time
@@ -51,6 +52,7 @@ from s3rl_torchrl.trainer.checkpoint import (
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.evaluation import EvalResult, RandomPolicy, evaluate, format_table
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
+from s3rl_torchrl.trainer.schedule import updates_owed
 
 FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
@@ -249,10 +251,18 @@ class Trainer:
             if self.stop.requested:
                 return False
             self._gradient_step()
-        epochs_done = self.counters.frames // self.cfg.collector.frames_per_epoch
-        if epochs_done > self.counters.epochs:
+        if self._epochs_due() > self.counters.epochs:
             self._end_epoch()
         return not self.stop.requested or self.counters.frames >= self.cfg.collector.total_frames
+
+    def _epochs_due(self) -> int:
+        """Epochs the frames so far have closed. The run's last frames close a last, shorter
+        epoch, so every run ends with a metrics row and a checkpoint (even one shorter than an
+        epoch)."""
+        frames, collector = self.counters.frames, self.cfg.collector
+        if frames >= collector.total_frames:
+            return math.ceil(frames / collector.frames_per_epoch)
+        return frames // collector.frames_per_epoch
 
     # ----------------------------------------------------------------------------- steps
     def _make_collector(self) -> Collector:
@@ -307,12 +317,11 @@ class Trainer:
             )
 
     def _updates_owed(self, frames: int) -> float:
-        # No learning from the uniform-random warm-up frames alone (FSRL starts after them).
-        if self.counters.frames < self.cfg.collector.init_random_frames:
-            return 0.0
-        if len(self.replay_buffer) < self.cfg.algo.batch_size:
-            return 0.0
-        return self.cfg.algo.update_per_step * frames
+        # No learning from the uniform-random warm-up frames alone (FSRL starts after them);
+        # the rule is shared with the config check that refuses runs which would never learn.
+        cfg = self.cfg
+        stored = len(self.replay_buffer)
+        return updates_owed(self.counters.frames, frames, stored, cfg.collector, cfg.algo)
 
     def _update(self, batch: TensorDictBase) -> TensorDictBase:
         """One gradient step on a batch; returns the detached losses and diagnostics."""
@@ -413,13 +422,15 @@ class Trainer:
         episodes, max_steps = cfg.eval.final_episodes, cfg.eval.max_steps
         result = evaluate(self.test_env, self.agent.actor, episodes, max_steps)
         result.save(self.run_dir / FINAL_EVAL_FILE)
-        rows = {f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}": result}
+        label = f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}"
+        rows = {label: result}
         if cfg.eval.random_baseline:
             rows["random policy (reference)"] = evaluate(
                 self.test_env, RandomPolicy(self.test_env), episodes, max_steps
             )
         title = f"Final evaluation: {episodes} deterministic episodes"
-        print("\n" + format_table(rows, title) + f"\n\nRun directory: {self.run_dir}\n")
+        table = format_table(rows, title, grad_steps={label: self.counters.grad_steps})
+        print("\n" + table + f"\n\nRun directory: {self.run_dir}\n")
         return result
 
     def _interrupted(self, progress) -> TrainResult:

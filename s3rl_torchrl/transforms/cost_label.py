@@ -2,11 +2,35 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
 from tensordict import TensorDictBase
 from tensordict.utils import NestedKey
 from torchrl.data import Categorical, Composite, TensorSpec
 from torchrl.envs.transforms import Transform
+
+
+def _one_key(
+    side: str,
+    key: NestedKey | None,
+    keys: NestedKey | Sequence[NestedKey] | None,
+    default: NestedKey,
+) -> NestedKey:
+    """The one key given as ``<side>_key`` or as torchrl's ``<side>_keys`` (a one-key list)."""
+    if keys is None:
+        return default if key is None else key
+    if key is not None:
+        raise TypeError(f"CostLabel: pass {side}_key or {side}_keys, not both.")
+    if isinstance(keys, str | tuple):  # a single (nested) key, as torchrl also accepts
+        return keys
+    keys = list(keys)
+    if len(keys) != 1:
+        raise ValueError(
+            f"CostLabel writes one label from one cost entry: {side}_keys must hold exactly one "
+            f"key, got {keys}."
+        )
+    return keys[0]
 
 
 class CostLabel(Transform):
@@ -31,14 +55,22 @@ class CostLabel(Transform):
         in_key: the cost key (default ``"cost"``).
         out_key: the label key (default ``"safe"``).
         threshold: the largest cost still called safe (default ``0.0``).
+        in_keys, out_keys: torchrl's spelling of ``in_key`` / ``out_key``: a one-key list (or
+            one key), e.g. ``CostLabel(in_keys=[("next", "cost")], out_keys=[("next", "safe")])``
+            for replay data. Give one spelling or the other, not both.
     """
 
     def __init__(
         self,
-        in_key: NestedKey = "cost",
-        out_key: NestedKey = "safe",
+        in_key: NestedKey | None = None,
+        out_key: NestedKey | None = None,
         threshold: float = 0.0,
+        *,
+        in_keys: NestedKey | Sequence[NestedKey] | None = None,
+        out_keys: NestedKey | Sequence[NestedKey] | None = None,
     ):
+        in_key = _one_key("in", in_key, in_keys, default="cost")
+        out_key = _one_key("out", out_key, out_keys, default="safe")
         super().__init__(in_keys=[in_key], out_keys=[out_key])
         self.threshold = float(threshold)
 

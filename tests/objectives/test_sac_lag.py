@@ -606,6 +606,7 @@ def test_fsrl_order_update_uses_the_updated_critics():
     assert set(out.keys()) == set(loss.out_keys)
 
 
+@pytest.mark.slow  # torch.compile of the loss: about a minute on a busy 2-core machine
 def test_checkpointing_a_compiled_loss_does_not_recompile_it():
     # SACLoss creates its target-entropy buffer on first use, e.g. at the first state_dict; the
     # module then changes under dynamo's guards. SACLagLoss settles it when it is built.

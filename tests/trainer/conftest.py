@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 from hydra import compose as hydra_compose
 from hydra import initialize_config_dir
 
+from s3rl_torchrl.recipes import config_dir
 from s3rl_torchrl.trainer import TrainConfig, register_configs, validate
 
-CONFIG_DIR = str(Path(__file__).resolve().parents[2] / "configs")
+CONFIG_DIR = str(config_dir())
 
 
 def compose_train(*overrides: str):

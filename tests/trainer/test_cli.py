@@ -10,6 +10,9 @@ from pathlib import Path
 
 import pytest
 
+# Each test starts the console scripts (a few seconds of imports each): all slow.
+pytestmark = pytest.mark.slow
+
 BIN = Path(sys.executable).parent
 TINY = ["experiment=tiny", "collector.total_frames=200", "collector.frames_per_epoch=200"]
 
@@ -86,3 +89,17 @@ def test_two_seed_multirun(tmp_path, launcher):
     ]
     rewards = [json.loads(p.read_text())["reward_mean"] for p in finals]
     assert rewards[0] != rewards[1]  # the seeds really differ
+
+
+def test_own_config_dir_adds_options_next_to_the_packaged_ones(tmp_path):
+    # docs/recipes.md: a user's experiment in a directory of theirs, building on `tiny`.
+    mine = tmp_path / "my_configs" / "experiment"
+    mine.mkdir(parents=True)
+    (mine / "short.yaml").write_text(
+        "# @package _global_\ndefaults:\n  - tiny\ncollector:\n  total_frames: 400\n"
+    )
+    out = run("s3rl-train", "--config-dir", str(tmp_path / "my_configs"), "experiment=short",
+              "--cfg", "job", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "total_frames: 400" in out.stdout  # the user's value
+    assert "frames_per_batch: 100" in out.stdout and "- 32" in out.stdout  # tiny's, inherited

@@ -115,3 +115,52 @@ def test_compile_without_a_cpp_compiler_fails_before_training(compose):
     message = str(err.value)
     assert "'compile'" in message and "no-such-c++-compiler" in message
     assert "compile=false" in message and "g++" in message
+
+
+# Gradient steps by hand (the loop's rule: update_per_step per frame of each batch ending at or
+# after init_random_frames with >= batch_size stored transitions; n-step holds back n_step
+# frames per env copy):
+# - quick, 4000 frames: batches end at 1000..4000 < 5000 -> 0.
+# - quick, 5000 frames: only the batch ending at 5000; 4 envs x (1250 - 2) = 4992 stored -> 500.
+# - tiny (600 frames): batches ending at 200..600 (5); at 200 stored 2 x (100 - 2) = 196 >= 32
+#   -> 5 x 100 x 0.25 = 125.
+# - tiny with batch_size 400: stored 2 x (50 k - 2) = 196, 296, 396, 496, 596 after the batches
+#   ending at 200..600 -> only the batches ending at 500 and 600 learn -> 50.
+# - tiny, 200 frames, batch_size 200: stored 196 < 200 at the only eligible batch -> 0.
+@pytest.mark.parametrize(
+    "overrides, steps",
+    [
+        (("experiment=quick", "collector.total_frames=4000"), 0),
+        (("experiment=quick", "collector.total_frames=5000"), 500),
+        (("experiment=tiny",), 125),
+        (("experiment=tiny", "algo.batch_size=400"), 50),
+        (("experiment=tiny", "collector.total_frames=200", "algo.batch_size=200"), 0),
+    ],
+)
+def test_planned_gradient_steps_by_hand(overrides, steps, compose):
+    from omegaconf import OmegaConf
+
+    from s3rl_torchrl.trainer.schedule import planned_gradient_steps
+
+    merged = OmegaConf.merge(OmegaConf.structured(TrainConfig), compose(*overrides))
+    cfg = OmegaConf.to_object(merged)
+    assert planned_gradient_steps(cfg.collector, cfg.algo) == steps
+
+
+def test_a_run_that_cannot_learn_is_refused(compose):
+    # The new user's run: 4000 frames of the quick experiment are all random warm-up.
+    with pytest.raises(ConfigError) as err:
+        validate(compose("experiment=quick", "collector.total_frames=4000", "compile=false"))
+    message = str(err.value)
+    assert "'collector.total_frames'" in message and "no gradient step" in message
+    assert "init_random_frames (5000)" in message and "algo.batch_size (256)" in message
+    # ... and what would work, each checked to learn: 5000 frames, or a 4000-frame warm-up.
+    assert "total_frames to 5000 or more" in message
+    assert "init_random_frames to 4000 or less" in message
+    for fix in ("collector.total_frames=5000", "collector.init_random_frames=4000"):
+        validate(compose("experiment=quick", "collector.total_frames=4000", fix, "compile=false"))
+    # total_frames == init_random_frames still learns on the last batch (not refused).
+    validate(compose("experiment=tiny", "collector.total_frames=200"))
+    # Too few stored transitions for one batch is refused as well.
+    with pytest.raises(ConfigError, match="no gradient step"):
+        validate(compose("experiment=tiny", "collector.total_frames=200", "algo.batch_size=200"))

@@ -77,6 +77,7 @@ def _counters(result):
     return c
 
 
+@pytest.mark.slow
 def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
     cfg = tiny_config("algo=s3rl", "task=SafetySwimmerVelocity-v1")
     full = train(cfg, tmp_path / "full")
@@ -97,6 +98,7 @@ def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
     assert (tmp_path / "part" / "final_eval.json").is_file()
 
 
+@pytest.mark.slow
 def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, monkeypatch):
     cfg = tiny_config("algo=sac_lag")
     full = train(cfg, tmp_path / "full")
@@ -120,6 +122,7 @@ def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, m
     assert [r["frames"] for r in read_metrics(tmp_path / "part")] == ["200", "400", "600"]
 
 
+@pytest.mark.slow
 def test_crash_after_checkpoint_drops_unsaved_metric_rows(tiny_config, tmp_path):
     cfg = tiny_config("algo=sac", "collector.total_frames=800", "save_interval=2")
 
@@ -172,6 +175,7 @@ def test_resuming_a_finished_run_only_evaluates(tiny_config, tmp_path):
     assert [r["frames"] for r in read_metrics(tmp_path)] == ["200"]
 
 
+@pytest.mark.slow
 def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
     cfg = tiny_config("algo=s3rl", "algo.update_order=fsrl", "task=SafetySwimmerVelocity-v1")
     result = train(cfg, tmp_path)
@@ -179,6 +183,7 @@ def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
     assert all(r["train/loss_actor"] != "nan" for r in read_metrics(tmp_path))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("update_order", ["joint", "fsrl"])
 def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp_path):
     # compile=true: the loss (joint) or its two halves (fsrl) go through torch.compile.
@@ -206,6 +211,7 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         assert torch.isfinite(torch.tensor(float(row[key])))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1)])
 def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_path):
     cfg = tiny_config(f"algo={algo}", f"algo.n_step={n_step}", "collector.total_frames=300")
@@ -254,3 +260,41 @@ def test_new_run_into_an_existing_run_dir_is_refused(tiny_config, tmp_path):
     with pytest.raises(FileExistsError, match="resume="):
         train(tiny_config("algo=sac_lag", "collector.total_frames=200"), tmp_path)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+
+
+def test_run_shorter_than_an_epoch_leaves_a_loadable_checkpoint(tiny_config, tmp_path, capsys):
+    # 300 frames, epochs of 400: the run's end closes a shorter last epoch (a metrics row and
+    # the final checkpoint), whatever the epoch length.
+    from s3rl_torchrl.trainer.evaluate_checkpoint import evaluate_checkpoint
+
+    cfg = tiny_config("algo=sac_lag", "collector.total_frames=300",
+                      "collector.frames_per_epoch=400")
+    result = train(cfg, tmp_path)
+    assert result.counters.epochs == 1
+    assert result.counters.grad_steps == expected_grad_steps(cfg) == 50
+    (row,) = read_metrics(tmp_path)
+    assert (row["frames"], row["epoch"], row["grad_steps"]) == ("300", "1", "50")
+    assert (tmp_path / "checkpoints" / "latest" / "state.pt").is_file()
+    # The final table says how much the policy was trained.
+    out = capsys.readouterr().out
+    assert "| gradient steps |" in out and "seed 10 | 2 |" in out and " | 50 |" in out
+
+    evaluated, train_cfg = evaluate_checkpoint(tmp_path, episodes=1, num_envs=1, max_steps=10)
+    assert evaluated.episodes == 1 and evaluated.length_mean == 10.0
+    assert train_cfg.collector.total_frames == 300
+
+
+def test_last_partial_epoch_is_logged_and_saved(tiny_config, tmp_path):
+    # 500 frames in epochs of 200: rows at 200, 400 and the run's end (500); the last
+    # checkpoint holds the finished run (resuming it only evaluates).
+    # Batches of 400: the 2-step transform holds back 2 frames per env copy, so the buffer
+    # holds 2 x (50 k - 2) transitions after k batches, >= 400 only after the 5th: 25 steps.
+    cfg = tiny_config("algo=sac", "collector.total_frames=500", "save_interval=5",
+                      "algo.batch_size=400")
+    first = train(cfg, tmp_path)
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "500"]
+    assert first.counters.epochs == 3 and first.counters.grad_steps == 25
+    cfg.resume = str(tmp_path)
+    again = train(cfg, tmp_path / "ignored")
+    assert _counters(again) == _counters(first)
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "500"]

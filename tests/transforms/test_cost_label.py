@@ -62,3 +62,19 @@ def test_replay_buffer_transform_labels_samples():
     rb.extend(_transitions([[0.0], [1.0], [0.0], [3.0]]))
     sample = rb.sample()
     torch.testing.assert_close(sample["next", "safe"], sample["next", "cost"] == 0)
+
+
+def test_torchrl_keyword_spelling():
+    # torchrl transforms take in_keys=/out_keys= lists; CostLabel accepts them as well.
+    costs = [[0.0], [1.0], [0.5], [0.0]]
+    label = CostLabel(in_keys=[("next", "cost")], out_keys=[("next", "safe")])
+    assert label.in_keys == [("next", "cost")] and label.out_keys == [("next", "safe")]
+    td = label(_transitions(costs))
+    assert td["next", "safe"].squeeze(-1).tolist() == [True, False, False, True]
+    # A single key and keyword threshold, as torchrl's own transforms allow.
+    td = CostLabel(in_keys="cost", out_keys="unsafe_free", threshold=0.5)(_transitions(costs))
+    assert td["next", "unsafe_free"].squeeze(-1).tolist() == [True, False, True, True]
+    with pytest.raises(TypeError, match="in_key or in_keys, not both"):
+        CostLabel(in_key="cost", in_keys=["cost"])
+    with pytest.raises(ValueError, match="exactly one key"):
+        CostLabel(in_keys=["cost", "cost2"])
