@@ -1,8 +1,8 @@
-"""The ``lagrangian`` buffer shared by the Lagrangian losses (DDPG-Lag, PPO-Lag).
+"""The ``lagrangian`` buffer shared by the Lagrangian losses (SAC-Lag, DDPG-Lag, PPO-Lag).
 
-Same contract as :class:`~s3rl_torchrl.objectives.SACLagLoss`: a float buffer of shape
-``[num_costs]``, set in place with :meth:`set_lagrangian` or ``loss.lagrangian = value`` (so
-that compiled graphs and optimisers holding the buffer see the new value).
+A float buffer of shape ``[num_costs]``, set in place with :meth:`set_lagrangian` or
+``loss.lagrangian = value`` (so that compiled graphs and optimisers holding the buffer see the
+new value).
 """
 
 from __future__ import annotations

@@ -40,6 +40,7 @@ from torchrl.objectives.utils import (
 )
 
 from s3rl_torchrl.modules.activation import ReLU, relu
+from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers", "sac_lag_update"]
 
@@ -172,7 +173,7 @@ class _BatchedMLP:
         return self._rest(h, parts, batch_shape)
 
 
-class SACLagLoss(SACLoss):
+class SACLagLoss(LagrangianBufferMixin, SACLoss):
     r"""SAC with Lagrangian cost penalties (FSRL's SAC-Lag), TensorDict-native.
 
     A subclass of :class:`torchrl.objectives.SACLoss` (version 2, no value network) that adds one
@@ -351,8 +352,7 @@ class SACLagLoss(SACLoss):
         self.num_costs = num_costs
         self.entropy_in_cost_target = bool(entropy_in_cost_target)
         self.rescaling = bool(rescaling)
-        self.register_buffer("lagrangian", torch.zeros(num_costs, device=self.log_alpha.device))
-        self.set_lagrangian(lagrangian_init)
+        self._init_lagrangian(lagrangian_init, device=self.log_alpha.device)
 
         if num_costs > 0:
             policy_params = list(actor_network.parameters()) if separate_losses else None
@@ -434,31 +434,6 @@ class SACLagLoss(SACLoss):
         # SACLoss.__init__ calls this before the cost critic exists.
         if "cost_qvalue_network" in self.__dict__:
             self._make_cost_vmap()
-
-    # ------------------------------------------------------------------ lagrangian
-    def set_lagrangian(self, value: float | Sequence[float] | Tensor) -> None:
-        """Set the multipliers in place: a number (same for every cost) or ``num_costs`` values."""
-        buffer = self._buffers["lagrangian"]
-        if isinstance(value, Tensor):
-            value = value.detach().to(device=buffer.device, dtype=buffer.dtype)
-        else:
-            value = torch.as_tensor(value, dtype=buffer.dtype, device=buffer.device)
-        if value.ndim == 0:
-            value = value.expand(self.num_costs)
-        if value.shape != buffer.shape:
-            raise ValueError(
-                f"lagrangian must be a number or {self.num_costs} values (one per cost), got "
-                f"shape {tuple(value.shape)}."
-            )
-        if not bool(torch.isfinite(value).all()) or bool((value < 0).any()):
-            raise ValueError(f"lagrangian must be finite and >= 0, got {value.tolist()}.")
-        buffer.copy_(value)
-
-    def __setattr__(self, name, value):
-        if name == "lagrangian" and "lagrangian" in self.__dict__.get("_buffers", {}):
-            self.set_lagrangian(value)
-            return
-        super().__setattr__(name, value)
 
     # ------------------------------------------------------------------ keys
     def _forward_value_estimator_keys(self, **kwargs) -> None:
