@@ -55,9 +55,10 @@ def _p(p: float) -> str:
 def _test_cell(result: TestResult) -> str:
     if math.isnan(result.pvalue):
         return f"– ({result.note}; {result.n})"
+    note = f"; {result.note}" if result.note else ""
     return (
         f"p = {_p(result.pvalue)}, CI [{_num(result.ci_low)}, {_num(result.ci_high)}] "
-        f"({result.n})"
+        f"({result.n}{note})"
     )
 
 

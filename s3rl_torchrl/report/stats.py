@@ -136,13 +136,14 @@ class TestResult:
 
 
 def _run_test(test: str, n: str, difference: float, run) -> TestResult:
-    # A sample without variance (e.g. every episode's cost is 0) has no t statistic: scipy
+    # Samples without variance (e.g. every episode's cost is 0) have no t statistic: scipy
     # returns NaN with a RuntimeWarning; the table says why instead.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         result = run()
         ci = result.confidence_interval(0.95)
-    note = "" if np.isfinite(result.pvalue) else "no variance"
+    # Equal non-zero differences give t = +-inf and p = 0 (scipy): kept, but flagged.
+    note = "" if np.isfinite(result.statistic) else "no variance"
     return TestResult(
         test, n, difference, float(ci.low), float(ci.high), float(result.pvalue),
         float(result.statistic), note,
