@@ -54,7 +54,7 @@ def _p(p: float) -> str:
 
 def _test_cell(result: TestResult) -> str:
     if math.isnan(result.pvalue):
-        return f"– ({result.note}; {result.n})"
+        return f"– ({result.note}; {result.n})" if result.n != "-" else f"– ({result.note})"
     note = f"; {result.note}" if result.note else ""
     return (
         f"p = {_p(result.pvalue)}, CI [{_num(result.ci_low)}, {_num(result.ci_high)}] "
@@ -217,7 +217,7 @@ def build_report(
     group_by: Sequence[str] = (),
     embeddings: bool = True,
     embedding_episodes: int = 2,
-    tsne_states: int = 2000,
+    tsne_states: int = 1000,
     command: str | None = None,
 ) -> Report:
     """Find the runs below ``root``, write ``<out>/report.md`` and its figures (PNG and SVG).
@@ -337,7 +337,9 @@ def build_report(
                 f"States of {embedding_episodes} deterministic evaluation rollouts of one "
                 "checkpoint per algo (`checkpoints/latest` of the lowest finished seed), "
                 "embedded by the policy encoder and coloured by their label (safe: the step "
-                "from that state costs nothing). Probe: a logistic regression predicting the "
+                f"from that state costs nothing; t-SNE of at most {tsne_states} of them, "
+                "drawn with a fixed seed). Probe (on all of them): a logistic regression "
+                "predicting the "
                 "label from the embedding, accuracy (chance: majority class) and ROC AUC on a "
                 "held-out 30%. *training*: the `probe/accuracy` and `probe/auc` columns of "
                 "`metrics.csv` at the last epoch (class-balanced replay-buffer sample), mean ± "

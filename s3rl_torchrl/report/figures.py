@@ -147,7 +147,7 @@ def safe_occupancy_bars(
 def embedding_tsne(
     panels: Mapping[str, Mapping[str, tuple[np.ndarray, np.ndarray, ProbeResult]]],
     out_dir: Path,
-    max_states: int = 2000,
+    max_states: int = 1000,
     seed: int = 0,
 ) -> list[Path]:
     """Figure 4: t-SNE (scikit-learn) of policy-encoder embeddings, safe vs unsafe states.
@@ -157,6 +157,7 @@ def embedding_tsne(
     seeded generator; the panel's title gives the linear probe's held-out accuracy / AUC.
     """
     from sklearn.manifold import TSNE
+    from threadpoolctl import threadpool_limits
 
     plt = _pyplot()
     tasks = list(panels)
@@ -170,8 +171,10 @@ def embedding_tsne(
             keep = np.sort(rng.permutation(len(z))[:max_states])
             z, safe = z[keep], safe[keep].astype(bool)
             perplexity = float(min(30.0, max(2.0, (len(z) - 1) / 3)))
-            xy = TSNE(n_components=2, perplexity=perplexity, init="pca",
-                      random_state=seed).fit_transform(z.astype(np.float64))
+            # One OpenMP thread: measured 2.5x faster than the default on 2 busy cores.
+            with threadpool_limits(limits=1):
+                xy = TSNE(n_components=2, perplexity=perplexity, init="pca",
+                          random_state=seed).fit_transform(z.astype(np.float64))
             ax.scatter(*xy[safe].T, s=4, c=SAFE_COLOUR, label=f"safe ({safe.sum()})", alpha=0.6)
             ax.scatter(*xy[~safe].T, s=4, c=UNSAFE_COLOUR, label=f"unsafe ({(~safe).sum()})",
                        alpha=0.8)

@@ -64,6 +64,7 @@ def linear_probe(
     from sklearn.model_selection import train_test_split
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
+    from threadpoolctl import threadpool_limits
 
     x = _numpy(embeddings).astype(np.float64).reshape(len(embeddings), -1)
     y = _numpy(safe).astype(bool).reshape(-1)
@@ -77,8 +78,11 @@ def linear_probe(
         x, y, test_size=test_fraction, stratify=y, random_state=seed
     )
     model = make_pipeline(StandardScaler(), LogisticRegression(max_iter=1000))
-    model.fit(x_train, y_train)
-    score = model.predict_proba(x_test)[:, 1]
+    # One BLAS thread: a fit of a few thousand rows gains nothing from more, and the trainer
+    # shares small machines (the same reason it runs torch on one thread).
+    with threadpool_limits(limits=1):
+        model.fit(x_train, y_train)
+        score = model.predict_proba(x_test)[:, 1]
     majority = max(y_test.mean(), 1.0 - y_test.mean())
     return ProbeResult(
         accuracy=float(accuracy_score(y_test, score >= 0.5)),
