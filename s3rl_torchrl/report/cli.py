@@ -10,6 +10,13 @@ from collections.abc import Sequence
 from s3rl_torchrl.report.runs import ReportError
 
 
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return value
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="s3rl-report",
@@ -23,14 +30,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", default=None, help="report directory (default: RUNS/report)")
     parser.add_argument("--reference", default="s3rl",
                         help="the algo compared with every other one (default: s3rl)")
-    parser.add_argument("--group-by", nargs="+", default=[], metavar="KEY",
-                        help="config keys (dotted, e.g. algo.pid.kp) that split the runs of "
-                             "one task and algo into separate groups")
+    parser.add_argument("--group-by", action="append", default=[], metavar="KEY",
+                        help="a config key (dotted, e.g. algo.pid.kp) that splits the runs of "
+                             "one task and algo into separate groups; repeatable")
     parser.add_argument("--no-embeddings", action="store_true",
                         help="skip Figure 4 and the probe table (no checkpoint rollouts)")
-    parser.add_argument("--embedding-episodes", type=int, default=2,
+    parser.add_argument("--embedding-episodes", type=_positive, default=2,
                         help="evaluation env copies rolled out per checkpoint (default: 2)")
-    parser.add_argument("--tsne-states", type=int, default=1000,
+    parser.add_argument("--tsne-states", type=_positive, default=1000,
                         help="at most this many states per t-SNE panel (default: 1000; "
                              "t-SNE time grows faster than linearly)")
     return parser.parse_args(argv)

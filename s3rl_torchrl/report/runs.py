@@ -237,7 +237,7 @@ def group_runs(runs: Sequence[Run], group_by: Sequence[str] = ()) -> list[RunGro
                 f"The runs of task={task} algo={algo} differ in more than the seed, so they are "
                 f"not seeds of one experiment:\n{lines}\nReport them separately (point "
                 f"s3rl-report at a narrower directory) or split them with "
-                f"--group-by {' '.join(diff)}."
+                + " ".join(f"--group-by {key}" for key in diff) + "."
             )
         seeds: dict[int, Run] = {}
         for run in members:
