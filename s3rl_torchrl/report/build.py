@@ -128,7 +128,7 @@ def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
             if not group.finished or group.extra:
                 continue
             s = summarize(group)
-            mine = [v for v in values if v.algo == group.algo]
+            mine = [v for v in values if v.algo == group.algo and v.metric in ("reward", "cost")]
             for table in sorted({v.table for v in mine}):
                 paper = {v.metric: v for v in mine if v.table == table}
                 lengths = [v for v in values if v.table == table and v.metric == "length"]
@@ -162,9 +162,12 @@ def _occupancy(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
             diff = "" if ref is None or label == reference else (
                 f"{ref.safe_occupancy_seeds.mean - s.safe_occupancy_seeds.mean:+.1f}"
             )
-            rows.append([task, label, _ms(s.safe_occupancy_seeds, 1), diff])
-    return _table(["task", "algo", "safe steps (%)", f"{reference} minus this (pp)"], rows,
-                  "llrr")
+            paper = [v for v in paper_results_for(task) if v.metric == "safe_occupancy_diff_pp"]
+            paper_diff = f"{paper[0].mean:+.1f}" if paper and label == "sac_lag" else ""
+            rows.append([task, label, _ms(s.safe_occupancy_seeds, 1), diff, paper_diff])
+    header = ["task", "algo", "safe steps (%)", f"{reference} minus this (pp)",
+              "paper: S3RL minus SAC-LAG (pp)"]
+    return _table(header, rows, "llrrr")
 
 
 def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:

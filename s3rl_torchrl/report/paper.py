@@ -1,4 +1,4 @@
-"""The paper's reported numbers (Table 1 and Table 2), shipped as package data.
+"""The paper's reported numbers (Table 1, Table 2, Figure 3's quoted differences), as package data.
 
 ``data/paper_results.csv`` holds one value per row (task, method, metric, mean, std) with its
 source in the file's header. Velocity tasks are named ``Safety<Robot>VelocityGymnasium-<v>`` in
@@ -23,13 +23,13 @@ DATA_FILE = "paper_results.csv"
 
 @dataclass(frozen=True)
 class PaperValue:
-    table: str  # "Table 1" or "Table 2"
+    table: str  # "Table 1", "Table 2" or "Figure 3" (differences quoted in Section 4.3)
     paper_label: str  # the task as printed
     task: str  # environment id
     setting: str  # "Lag" or "Non-Lag"
     method: str  # the paper's name, e.g. "SAC-LAG"
     algo: str  # this package's algo name ("" for a value shared by both methods)
-    metric: str  # "reward", "cost" or "length"
+    metric: str  # "reward", "cost", "length" or "safe_occupancy_diff_pp"
     mean: float
     std: float
 

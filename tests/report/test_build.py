@@ -80,7 +80,8 @@ def test_report_on_synthetic_runs(tmp_path, make_run):
     # The paper's Table 1 numbers for this task (our v1 id = the paper's Gymnasium-API id).
     assert "| Table 1 (S3RL, Lag) |" in text and "2828.95 ± 50.71" in text
     # Figure 3's difference in percentage points: (194 - 160) / 200 * 100 = 17.0
-    assert f"| {TASK} | sac_lag | 80.0 ± 0.0 | +17.0 |" in text
+    # (the paper quotes no Figure 3 difference for HalfCheetah: last column empty)
+    assert f"| {TASK} | sac_lag | 80.0 ± 0.0 | +17.0 |  |" in text
 
     names = {p.name for p in report.figures}
     for stem in ("figure2_learning_curves", "figure3_safe_occupancy"):

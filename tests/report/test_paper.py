@@ -34,6 +34,14 @@ def test_table2_values_as_printed():
     assert nolag.setting == "Non-Lag" and nolag.paper_label == "Half Cheetah-v1"
 
 
+def test_figure3_differences_quoted_in_the_text():
+    ant = paper_results_for("SafetyAntVelocity-v1")
+    (diff,) = [v for v in ant if v.metric == "safe_occupancy_diff_pp"]
+    assert (diff.table, diff.mean) == ("Figure 3", 9.6)  # Section 4.3: "AntVelocity +9.6 pp"
+    (ball,) = [v for v in paper_results_for("SafetyBallRun-v0") if v.table == "Figure 3"]
+    assert ball.mean == 91.3
+
+
 def test_our_task_ids_find_the_papers_gymnasium_api_ids():
     ours = paper_results_for("SafetyHalfCheetahVelocity-v1")
     assert ours == paper_results_for("SafetyHalfCheetahVelocityGymnasium-v1") and ours
