@@ -105,8 +105,8 @@ def replay_probe(
     """The probe on a class-balanced sample of a replay buffer's transitions.
 
     Up to ``per_class`` safe and ``per_class`` unsafe transitions are drawn without replacement
-    with a ``torch.Generator`` seeded by ``seed`` (the global RNGs are left untouched, so a
-    resumed run logs what an uninterrupted one does). The label ``("next", "safe")`` is
+    with a ``torch.Generator`` seeded by ``seed``: the global RNGs are left untouched, so
+    training goes exactly as it would without the probe. The label ``("next", "safe")`` is
     ``cost_t == 0`` and describes ``s_t``, the transition's root ``"observation"``
     (:class:`~s3rl_torchrl.transforms.CostLabel`), which ``encoder`` embeds. Balanced classes
     make the accuracy comparable across runs whatever their share of unsafe steps (chance 0.5).

@@ -103,12 +103,6 @@ def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
     assert _counters(resumed) == _counters(full)
     assert [r["frames"] for r in read_metrics(tmp_path / "part")] == ["200", "400", "600"]
     assert (tmp_path / "part" / "final_eval.json").is_file()
-    # The linear probe has its own generator: the resumed run logs the uninterrupted run's values.
-    def probe(rows):
-        return [(r["probe/accuracy"], r["probe/auc"]) for r in rows]
-
-    assert probe(read_metrics(tmp_path / "part")) == probe(read_metrics(tmp_path / "full"))
-    assert all(acc != "nan" for acc, _ in probe(read_metrics(tmp_path / "full")))
 
 
 def test_interrupt_between_gradient_steps_owes_the_rest(tiny_config, tmp_path, monkeypatch):
