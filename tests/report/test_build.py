@@ -14,6 +14,7 @@ from hydra import compose, initialize_config_dir
 from scipy import stats
 
 from s3rl_torchrl.report.build import build_report
+from s3rl_torchrl.report.cli import main
 from s3rl_torchrl.report.runs import read_run
 from s3rl_torchrl.trainer import register_configs, train, validate
 
@@ -99,16 +100,18 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_cli_errors_and_success(tmp_path, make_run):
+def test_cli_errors_and_success(tmp_path, make_run, capsys):
     empty = tmp_path / "empty"
     empty.mkdir()
-    out = _cli(str(empty))
-    assert out.returncode == 2 and "No runs found below" in out.stderr
+    assert main([str(empty)]) == 2
+    assert "No runs found below" in capsys.readouterr().err
 
     make_run(tmp_path / "mixed" / "a", seed=1)
     make_run(tmp_path / "mixed" / "b", seed=2, collector__total_frames=800)
-    out = _cli(str(tmp_path / "mixed"))
-    assert out.returncode == 2 and "collector.total_frames" in out.stderr
+    assert main([str(tmp_path / "mixed")]) == 2
+    assert "collector.total_frames: 600" in capsys.readouterr().err
+
+    # The module as a program (what the s3rl-report console script runs).
 
     out = _cli(str(tmp_path / "mixed"), "--group-by", "collector.total_frames",
                "--out", str(tmp_path / "rep"), "--no-embeddings")
