@@ -49,7 +49,7 @@ def _num(x: float, digits: int = 2) -> str:
 def _p(p: float) -> str:
     if math.isnan(p):
         return "–"
-    return f"{p:.2g}" if p >= 1e-4 else "<1e-4"
+    return f"= {p:.2g}" if p >= 1e-4 else "< 1e-4"
 
 
 def _test_cell(result: TestResult) -> str:
@@ -57,7 +57,7 @@ def _test_cell(result: TestResult) -> str:
         return f"– ({result.note}; {result.n})" if result.n != "-" else f"– ({result.note})"
     note = f"; {result.note}" if result.note else ""
     return (
-        f"p = {_p(result.pvalue)}, CI [{_num(result.ci_low)}, {_num(result.ci_high)}] "
+        f"p {_p(result.pvalue)}, CI [{_num(result.ci_low)}, {_num(result.ci_high)}] "
         f"({result.n}{note})"
     )
 

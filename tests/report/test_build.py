@@ -76,7 +76,7 @@ def test_report_on_synthetic_runs(tmp_path, make_run):
     # Every seed has the same costs: the seed-paired cost differences are all -11.5, scipy
     # says t = -inf, p = 0, and the table flags it.
     cost_row = next(line for line in text.splitlines() if "| cost | s3rl − sac_lag |" in line)
-    assert "| -11.50 | p = <1e-4, CI [-11.50, -11.50] (3 pairs; no variance) |" in cost_row
+    assert "| -11.50 | p < 1e-4, CI [-11.50, -11.50] (3 pairs; no variance) |" in cost_row
 
     # The paper's Table 1 numbers for this task (our v1 id = the paper's Gymnasium-API id).
     assert "| Table 1 (S3RL, Lag) |" in text and "2828.95 ± 50.71" in text
