@@ -119,7 +119,7 @@ def replay_probe(
     if size == 0:
         return linear_probe(np.zeros((0, 1)), np.zeros(0, dtype=bool))
     stored = storage[:size]  # a view on the first `size` slots (the filled ones)
-    labels = stored.get(label_key).reshape(size, -1)[:, 0].bool()
+    labels = stored.get(label_key).reshape(size, -1)[:, 0].bool().cpu()
     generator = torch.Generator().manual_seed(int(seed))
     picked = []
     for mask in (labels, ~labels):
@@ -127,8 +127,10 @@ def replay_probe(
         order = torch.randperm(len(index), generator=generator)[:per_class]
         picked.append(index[order])
     index = torch.cat(picked)
+    device = next(encoder.parameters()).device  # the buffer may live elsewhere
     with torch.no_grad():
-        embeddings = encoder(stored[index].select(*encoder.in_keys)).get(encoder.out_keys[0])
+        states = stored[index].select(*encoder.in_keys).to(device)
+        embeddings = encoder(states).get(encoder.out_keys[0])
     return linear_probe(embeddings, labels[index], seed=int(seed) % 2**32)
 
 
