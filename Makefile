@@ -7,11 +7,15 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 TORCH_SPEC ?=
 EXTRAS ?= dev
+# bullet-safety-gym pins gymnasium~=0.28.1 in its metadata but runs on Gymnasium 1.x, so it is
+# installed without its dependency pins (its real dependency, pybullet, is the `bullet` extra,
+# part of `dev`). Empty BULLET_SPEC skips it. See docs/installation.md.
+BULLET_SPEC ?= bullet-safety-gym==1.4.0
 STAMP := $(VENV)/.installed-$(EXTRAS)
 
 .PHONY: setup train test lint bench clean
 
-$(STAMP): pyproject.toml constraints.txt
+$(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	@if [ -n "$(TORCH_SPEC)" ]; then \
@@ -20,6 +24,9 @@ $(STAMP): pyproject.toml constraints.txt
 		cp constraints.txt $(VENV)/constraints.txt; \
 	fi
 	$(BIN)/python -m pip install --quiet -c $(VENV)/constraints.txt -e ".[$(EXTRAS)]"
+	@if [ -n "$(BULLET_SPEC)" ]; then \
+		$(BIN)/python -m pip install --quiet --no-deps "$(BULLET_SPEC)"; \
+	fi
 	@touch $(STAMP)
 
 setup: $(STAMP)

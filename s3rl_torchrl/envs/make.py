@@ -1,7 +1,8 @@
-"""``make_env``: a velocity task as a TorchRL env carrying ``("next", "cost")``."""
+"""``make_env``: any registered task as a TorchRL env carrying ``("next", "cost")``."""
 
 from __future__ import annotations
 
+import importlib
 from functools import partial
 from typing import Any, Literal
 
@@ -13,7 +14,6 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import (
     DoubleToFloat,
     EnvBase,
-    GymEnv,
     GymWrapper,
     InitTracker,
     ParallelEnv,
@@ -24,7 +24,9 @@ from torchrl.envs import (
 )
 from torchrl.envs.gym_like import BaseInfoDictReader
 
+from s3rl_torchrl.envs.bullet import import_bullet_safety_gym
 from s3rl_torchrl.envs.registry import get_task
+from s3rl_torchrl.envs.spec import EXTRA_INSTALL, TaskSpec
 from s3rl_torchrl.transforms import CostLabel, EpisodeSum
 
 Batching = Literal["sync_vector", "async_vector", "serial", "parallel"]
@@ -60,6 +62,23 @@ class CostInfoReader(BaseInfoDictReader):
         return self._info_spec
 
 
+def require_task_module(spec: TaskSpec) -> None:
+    """Import the module that registers ``spec``'s id, naming the pip extra if it is missing."""
+    if spec.requires_module is None:
+        return
+    try:
+        if spec.family == "bullet":
+            import_bullet_safety_gym()
+        else:
+            importlib.import_module(spec.requires_module)
+    except ImportError as error:
+        hint = EXTRA_INSTALL.get(spec.extra or "", f"pip install {spec.requires_module}")
+        raise ImportError(
+            f"Task {spec.env_id!r} needs the optional package {spec.requires_module!r} "
+            f"(extra {spec.extra!r}), which cannot be imported ({error}). Install it with: {hint}"
+        ) from error
+
+
 def make_base_env(
     task: str,
     num_envs: int = 0,
@@ -68,22 +87,20 @@ def make_base_env(
     vectorization: Literal["sync", "async"] = "sync",
     **gym_kwargs: Any,
 ) -> GymWrapper:
-    """A velocity task as a plain torchrl Gym env with the cost read from ``info``.
+    """A registered task as a plain torchrl Gym env with the cost read from ``info``.
 
     ``num_envs=0`` wraps one Gymnasium env; ``num_envs >= 1`` wraps a Gymnasium vector env of
     that many copies (``vectorization="sync"``: one process; ``"async"``: one process per copy).
     Vector envs run with ``AutoresetMode.DISABLED`` so that torchrl, not Gymnasium, decides
     when a copy resets (torchrl's own reset semantics, no lost final observation).
     """
-    get_task(task)  # fail early, listing the valid names
-    # "module:id" makes Gymnasium import this package (and so register the task) first, which
-    # worker processes (ParallelEnv, Gymnasium's AsyncVectorEnv) need.
-    env_id = f"s3rl_torchrl:{task}"
+    spec = get_task(task)  # fail early, listing the valid names
+    require_task_module(spec)
     if num_envs == 0:
-        env = GymEnv(env_id, device=device, **gym_kwargs)
+        env = GymWrapper(gym.make(spec.gym_id, **gym_kwargs), device=device)
     else:
         vector_env = gym.make_vec(
-            env_id,
+            spec.gym_id,
             num_envs=num_envs,
             vectorization_mode=vectorization,
             vector_kwargs={"autoreset_mode": gym.vector.AutoresetMode.DISABLED},
@@ -103,15 +120,15 @@ def make_env(
     cost_label: bool = True,
     **gym_kwargs: Any,
 ) -> TransformedEnv:
-    """Build a velocity task as a TorchRL env.
+    """Build a registered task (any family) as a TorchRL env.
 
     Step tensordicts carry ``("next", "reward")`` and ``("next", "cost")`` (both ``[..., 1]``
     float32), float32 ``observation``, ``step_count``, ``episode_reward``, ``episode_cost``,
     ``is_init`` and, with ``cost_label``, the boolean ``("next", "safe")``.
 
     Args:
-        task: a registered id, e.g. ``"SafetyHalfCheetahVelocity-v1"``
-            (see :func:`s3rl_torchrl.envs.task_names`).
+        task: a registered id, e.g. ``"SafetyHalfCheetahVelocity-v1"`` or
+            ``"SafetyBallRun-v0"`` (see :func:`s3rl_torchrl.envs.task_names`).
         num_envs: number of copies batched into one env (batch size ``[num_envs]``);
             ``1`` gives an unbatched env.
         seed: seeds the env (each copy gets its own seed derived from it).
@@ -124,7 +141,7 @@ def make_env(
         cost_label: append :class:`~s3rl_torchrl.transforms.CostLabel` (``("next", "safe")``).
         **gym_kwargs: passed to ``gymnasium.make`` (e.g. ``render_mode="rgb_array"``).
     """
-    get_task(task)
+    require_task_module(get_task(task))
     if not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}.")
     if batching not in BATCHING_CHOICES:

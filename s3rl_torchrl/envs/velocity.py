@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator
 from gymnasium.utils import EzPickle
 
-from s3rl_torchrl.envs.registry import MAX_EPISODE_STEPS, TASKS, SpeedKind
+from s3rl_torchrl.envs.registry import MAX_EPISODE_STEPS, VELOCITY_REGISTRATIONS, SpeedKind
 
 
 def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
@@ -70,8 +70,8 @@ make_velocity_gym_env.metadata = {"render_modes": ["human", "rgb_array", "depth_
 
 
 def register_velocity_tasks() -> None:
-    """Register every task of the registry with Gymnasium (idempotent; runs on import)."""
-    for env_id, registered in TASKS.items():
+    """Register every velocity id with Gymnasium (idempotent; runs on import)."""
+    for env_id, registered in VELOCITY_REGISTRATIONS.items():
         if env_id in gym.registry:
             continue
         task = registered.task

@@ -1,9 +1,13 @@
-"""Network builders: the S3RL actor (policy encoder + Gaussian head) and the critics."""
+"""Network builders: the S3RL actor (policy encoder + Gaussian head), the deterministic DDPG
+actor (same encoder), the critics."""
 
 from s3rl_torchrl.modules.activation import ReLU, relu  # noqa: F401
 from s3rl_torchrl.modules.actor import (  # noqa: F401
+    DeterministicHead,
     GaussianHead,
     PolicyEncoder,
+    build_ddpg_exploration,
+    build_deterministic_actor,
     build_s3rl_actor,
     get_policy_encoder,
 )

@@ -16,11 +16,19 @@ from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import Bounded, TensorSpec
 from torchrl.envs.utils import ExplorationType
-from torchrl.modules import ProbabilisticActor, TanhNormal
+from torchrl.modules import AdditiveGaussianModule, ProbabilisticActor, TanhNormal
 
 from s3rl_torchrl.modules.activation import ReLU
 
-__all__ = ["PolicyEncoder", "GaussianHead", "build_s3rl_actor", "get_policy_encoder"]
+__all__ = [
+    "DeterministicHead",
+    "GaussianHead",
+    "PolicyEncoder",
+    "build_ddpg_exploration",
+    "build_deterministic_actor",
+    "build_s3rl_actor",
+    "get_policy_encoder",
+]
 
 
 class PolicyEncoder(TensorDictModule):
@@ -67,15 +75,32 @@ class GaussianHead(nn.Module):
         return loc, scale
 
 
-def _unbatched_action_spec(action_spec: TensorSpec) -> Bounded:
+class DeterministicHead(nn.Module):
+    """``z -> low + (tanh(W z + b) + 1) (high - low) / 2``: a deterministic action in bounds.
+
+    tianshou's ``Actor`` (FSRL's DDPG-Lag actor): a linear map, ``tanh``, then the policy's
+    action scaling from ``[-1, 1]`` to ``[low, high]``.
+    """
+
+    def __init__(self, in_features: int, low: torch.Tensor, high: torch.Tensor):
+        super().__init__()
+        self.linear = nn.Linear(in_features, low.shape[-1])
+        self.register_buffer("loc", (high + low) / 2)
+        self.register_buffer("half_range", (high - low) / 2)
+
+    def forward(self, embedding: torch.Tensor) -> torch.Tensor:
+        return self.loc + self.half_range * torch.tanh(self.linear(embedding))
+
+
+def _unbatched_action_spec(action_spec: TensorSpec, caller: str = "build_s3rl_actor") -> Bounded:
     """The per-env action spec: a batched env's spec repeats it along the leading dims."""
     if not isinstance(action_spec, Bounded):
         raise TypeError(
-            "build_s3rl_actor: action_spec must be a bounded continuous spec "
+            f"{caller}: action_spec must be a bounded continuous spec "
             f"(torchrl.data.Bounded, e.g. env.action_spec), got {type(action_spec).__name__}."
         )
     if action_spec.ndim == 0:
-        raise ValueError("build_s3rl_actor: action_spec must have an action dimension.")
+        raise ValueError(f"{caller}: action_spec must have an action dimension.")
     single = action_spec[(0,) * (action_spec.ndim - 1)] if action_spec.ndim > 1 else action_spec
     low, high = single.space.low, single.space.high
     batched_low = action_spec.space.low.reshape(-1, low.shape[-1])
@@ -85,12 +110,12 @@ def _unbatched_action_spec(action_spec: TensorSpec) -> Bounded:
         and torch.equal(batched_high, high.expand_as(batched_high))
     ):
         raise ValueError(
-            "build_s3rl_actor: the batched action_spec has different bounds per env; pass the "
+            f"{caller}: the batched action_spec has different bounds per env; pass the "
             "spec of one env."
         )
     if not torch.all(high > low):
         raise ValueError(
-            f"build_s3rl_actor: action_spec needs high > low everywhere, got low={low.tolist()}, "
+            f"{caller}: action_spec needs high > low everywhere, got low={low.tolist()}, "
             f"high={high.tolist()}."
         )
     return single
@@ -131,26 +156,11 @@ def build_s3rl_actor(
 
     Use :func:`get_policy_encoder` to reach the encoder (it shares the actor's parameters).
     """
-    observation_dim = int(observation_dim)
-    hidden = tuple(int(h) for h in hidden)
-    if observation_dim < 1:
-        raise ValueError(f"observation_dim must be >= 1, got {observation_dim}.")
-    if not hidden or min(hidden) < 1:
-        raise ValueError(
-            f"hidden must be a non-empty sequence of positive layer sizes (the last is the "
-            f"embedding size), got {hidden}."
-        )
+    encoder, hidden = _policy_encoder(
+        observation_dim, hidden, activation, observation_key, embedding_key
+    )
     action_spec = _unbatched_action_spec(action_spec)
     low, high = action_spec.space.low, action_spec.space.high
-
-    layers: list[nn.Module] = []
-    in_features = observation_dim
-    for width in hidden:
-        layers += [nn.Linear(in_features, width), activation()]
-        in_features = width
-    encoder = PolicyEncoder(
-        nn.Sequential(*layers), in_keys=[observation_key], out_keys=[embedding_key]
-    )
     head = TensorDictModule(
         GaussianHead(hidden[-1], action_spec.shape[-1], log_std_bounds, unbounded=unbounded),
         in_keys=[embedding_key],
@@ -172,8 +182,109 @@ def build_s3rl_actor(
     return actor
 
 
+def _policy_encoder(
+    observation_dim: int,
+    hidden: Sequence[int],
+    activation: type[nn.Module],
+    observation_key: NestedKey,
+    embedding_key: NestedKey,
+) -> tuple[PolicyEncoder, tuple[int, ...]]:
+    observation_dim = int(observation_dim)
+    hidden = tuple(int(h) for h in hidden)
+    if observation_dim < 1:
+        raise ValueError(f"observation_dim must be >= 1, got {observation_dim}.")
+    if not hidden or min(hidden) < 1:
+        raise ValueError(
+            f"hidden must be a non-empty sequence of positive layer sizes (the last is the "
+            f"embedding size), got {hidden}."
+        )
+    layers: list[nn.Module] = []
+    in_features = observation_dim
+    for width in hidden:
+        layers += [nn.Linear(in_features, width), activation()]
+        in_features = width
+    encoder = PolicyEncoder(
+        nn.Sequential(*layers), in_keys=[observation_key], out_keys=[embedding_key]
+    )
+    return encoder, hidden
+
+
+def build_deterministic_actor(
+    observation_dim: int,
+    action_spec: TensorSpec,
+    hidden: Sequence[int] = (128, 128),
+    activation: type[nn.Module] = ReLU,
+    *,
+    observation_key: NestedKey = "observation",
+    embedding_key: NestedKey = "embedding",
+    action_key: NestedKey = "action",
+) -> TensorDictSequential:
+    """Build a deterministic policy ``observation -> action`` for DDPG(-Lag).
+
+    ``observation -> PolicyEncoder (MLP, hidden sizes `hidden`, activation after every layer) ->
+    embedding -> DeterministicHead -> action in [low, high]``: FSRL's DDPG-Lag actor (tianshou
+    ``Net`` + ``Actor``, ``fsrl/agent/ddpg_lag_agent.py``) with the same trunk class as
+    :func:`build_s3rl_actor`, so :func:`get_policy_encoder`, ``SafetyInfoNCELoss`` and
+    ``ContrastivePhase`` work on it unchanged. Orthogonal weights, zero biases.
+
+    It plugs into :class:`torchrl.objectives.DDPGLoss` and
+    :class:`~s3rl_torchrl.objectives.DDPGLagLoss` as is; collect with
+    :func:`build_ddpg_exploration` around it.
+    """
+    action_spec = _unbatched_action_spec(action_spec, "build_deterministic_actor")
+    low, high = action_spec.space.low, action_spec.space.high
+    encoder, hidden = _policy_encoder(
+        observation_dim, hidden, activation, observation_key, embedding_key
+    )
+    head = TensorDictModule(
+        DeterministicHead(hidden[-1], low.float(), high.float()),
+        in_keys=[embedding_key],
+        out_keys=[action_key],
+    )
+    actor = TensorDictSequential(encoder, head)
+    for module in actor.modules():
+        if isinstance(module, nn.Linear):
+            nn.init.orthogonal_(module.weight)
+            nn.init.zeros_(module.bias)
+    return actor
+
+
+def build_ddpg_exploration(
+    actor: TensorDictModule,
+    action_spec: TensorSpec,
+    sigma: float = 0.1,
+    *,
+    action_key: NestedKey = "action",
+) -> TensorDictSequential:
+    """The collection policy of DDPG: ``actor`` followed by additive Gaussian noise.
+
+    FSRL's default exploration (``GaussianNoise(sigma=0.1)`` in ``fsrl/policy/ddpg_lag.py``)
+    adds ``N(0, sigma^2)`` to the action in tianshou's ``[-1, 1]`` action scale; here that is
+    torchrl's :class:`~torchrl.modules.AdditiveGaussianModule` with a constant ``sigma`` and a
+    per-dimension ``std`` of half the action range, followed by clipping to the bounds (tianshou's
+    ``action_bound_method="clip"``). The noise is added only under
+    ``ExplorationType.RANDOM`` (the collector's default); evaluation with
+    ``set_exploration_type(DETERMINISTIC)`` gives the actor's own action. The actor's parameters
+    are shared, not copied.
+    """
+    sigma = float(sigma)
+    if not sigma >= 0:
+        raise ValueError(f"sigma must be >= 0, got {sigma!r}.")
+    single = _unbatched_action_spec(action_spec, "build_ddpg_exploration")
+    noise = AdditiveGaussianModule(
+        single,
+        sigma_init=sigma,
+        sigma_end=sigma,
+        annealing_num_steps=1,
+        action_key=action_key,
+    )
+    noise.std = ((single.space.high - single.space.low) / 2).float()
+    return TensorDictSequential(actor, noise)
+
+
 def get_policy_encoder(actor: nn.Module) -> PolicyEncoder:
-    """The encoder (``observation -> embedding``) inside an actor from :func:`build_s3rl_actor`.
+    """The encoder (``observation -> embedding``) inside an actor from :func:`build_s3rl_actor`
+    or :func:`build_deterministic_actor`.
 
     It is the actor's own submodule: training it trains the actor's trunk.
     """

@@ -1,5 +1,11 @@
 """TorchRL loss modules and Lagrangian controllers."""
 
+from s3rl_torchrl.objectives.ddpg_lag import (  # noqa: F401
+    DDPGLagLoss,
+    DDPGLagOptimizers,
+    ddpg_lag_update,
+    make_ddpg_lag_optimizers,
+)
 from s3rl_torchrl.objectives.infonce import (  # noqa: F401
     SafetyInfoNCELoss,
     infonce_logits,
@@ -15,6 +21,7 @@ from s3rl_torchrl.objectives.nstep import (  # noqa: F401
     make_nstep_transform,
     nstep_transition,
 )
+from s3rl_torchrl.objectives.ppo_lag import PPOLagLoss  # noqa: F401
 from s3rl_torchrl.objectives.sac_lag import (  # noqa: F401
     SACLagLoss,
     SACLagOptimizers,

@@ -199,7 +199,7 @@ def _embedding_panels(
                 notes.append(f"Figure 4: no finished run of {task} / {group.label} has a "
                              "checkpoint (checkpoints/latest); left out.")
                 continue
-            max_steps = int(run.config.get("eval", {}).get("max_steps", 1000))
+            max_steps = run.config.get("eval", {}).get("max_steps")  # None: the task's length
             data = rollout_embeddings(run.checkpoint, episodes=episodes, max_steps=max_steps)
             probe = linear_probe(data.embeddings, data.safe, seed=0)
             panels.setdefault(task, {})[f"{group.label} (seed {run.seed})"] = (

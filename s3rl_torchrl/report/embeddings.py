@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from s3rl_torchrl.envs import make_env
+from s3rl_torchrl.envs import get_task, make_env
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 
@@ -24,15 +24,18 @@ class RolloutEmbeddings:
 
 
 def rollout_embeddings(
-    checkpoint: str | Path, episodes: int = 2, max_steps: int = 1000, seed: int = 0
+    checkpoint: str | Path, episodes: int = 2, max_steps: int | None = None, seed: int = 0
 ) -> RolloutEmbeddings:
     """Roll a checkpoint's policy out deterministically and embed every visited state.
 
-    ``episodes`` env copies run ``max_steps`` steps each on fresh test envs (an episode that
-    ends early is reset and continues, so every copy gives ``max_steps`` states). Each state
+    ``episodes`` env copies run ``max_steps`` steps each (None: the task's episode length) on
+    fresh test envs (an episode that ends early is reset and continues, so every copy gives
+    ``max_steps`` states). Each state
     ``s_t`` is labelled safe when the step taken from it costs nothing (``CostLabel``).
     """
     actor, cfg = load_policy(checkpoint)
+    if max_steps is None:
+        max_steps = get_task(cfg.task.name).max_episode_steps
     encoder = get_policy_encoder(actor)
     env = make_env(cfg.task.name, num_envs=episodes, seed=seed)
     try:

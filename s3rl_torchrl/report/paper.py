@@ -46,14 +46,15 @@ def load_paper_results() -> tuple[PaperValue, ...]:
 
 
 def task_aliases(task: str) -> set[str]:
-    """``task`` and, for a registered velocity task, both Safety-Gymnasium ids of it."""
+    """``task`` and every registered id of the same task (e.g. a velocity task's
+    ``Safety<Robot>Velocity-<v>`` and ``Safety<Robot>VelocityGymnasium-<v>``)."""
     from s3rl_torchrl.envs.registry import TASKS
 
-    names = {task}
-    registered = TASKS.get(task)
-    if registered is not None and registered.mujoco_version == "v4":
-        names |= {registered.task.env_id, registered.task.gymnasium_api_id}
-    return names
+    spec = TASKS.get(task)
+    if spec is None:
+        return {task}
+    main = spec.alias_of or task
+    return {task, main} | {name for name, s in TASKS.items() if s.alias_of == main}
 
 
 def paper_results_for(task: str) -> list[PaperValue]:

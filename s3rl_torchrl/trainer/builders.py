@@ -36,7 +36,7 @@ from s3rl_torchrl.objectives import (
 )
 from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
 
-# The velocity tasks have one cost signal; the loss and the controllers take m >= 1.
+# Every registered task has one cost signal; the loss and the controllers take m >= 1.
 NUM_COSTS = 1
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {

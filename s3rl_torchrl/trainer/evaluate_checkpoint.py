@@ -6,7 +6,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from s3rl_torchrl.envs import make_env
+from s3rl_torchrl.envs import get_task, make_env
 from s3rl_torchrl.trainer.builders import build_agent, build_replay_buffer
 from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint
 from s3rl_torchrl.trainer.config import TrainConfig
@@ -37,11 +37,16 @@ def evaluate_checkpoint(
     episodes: int = 10,
     num_envs: int = 2,
     seed: int = 0,
-    max_steps: int = 1000,
+    max_steps: int | None = None,
     video_path: str | Path | None = None,
 ) -> tuple[EvalResult, TrainConfig]:
-    """Deterministic evaluation of a checkpoint on fresh test envs (and an optional video)."""
+    """Deterministic evaluation of a checkpoint on fresh test envs (and an optional video).
+
+    ``max_steps=None`` rolls out the task's episode length (the registry's).
+    """
     actor, cfg = load_policy(checkpoint)
+    if max_steps is None:
+        max_steps = get_task(cfg.task.name).max_episode_steps
     env = make_env(cfg.task.name, num_envs=num_envs, seed=seed)
     result = evaluate(env, actor, episodes, max_steps)
     env.close()

@@ -8,14 +8,17 @@ from tensordict.nn import TensorDictModule
 from torchrl.envs import DoubleToFloat, GymEnv, TransformedEnv, default_info_dict_reader
 from torchrl.envs.utils import check_env_specs
 
-from s3rl_torchrl.envs import TASKS, make_env, task_names
+from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, get_task, make_env, task_names
 
 
-# Every task on both robot versions (the Gymnasium-API aliases build the same envs).
-@pytest.mark.parametrize("task", [t for t in task_names() if "VelocityGymnasium" not in t])
+# Every task of every family, v5 variants included (aliases build the same envs).
+@pytest.mark.parametrize("task", task_names(include_aliases=False))
 def test_check_env_specs(task):
     env = make_env(task, seed=0)
     check_env_specs(env, seed=0)
+    spec = get_task(task)  # the registry's sizes are the built env's
+    assert env.observation_spec["observation"].shape == (spec.obs_dim,)
+    assert env.action_spec.shape == (spec.act_dim,)
     env.close()
 
 
@@ -108,7 +111,11 @@ def test_bad_arguments_fail_clearly():
 def test_every_alias_builds_the_same_task():
     a = make_env("SafetyWalker2dVelocity-v1", seed=0)
     b = make_env("SafetyWalker2dVelocityGymnasium-v1", seed=0)
-    assert TASKS["SafetyWalker2dVelocity-v1"].task is TASKS["SafetyWalker2dVelocityGymnasium-v1"].task
+    registered = VELOCITY_REGISTRATIONS
+    assert (
+        registered["SafetyWalker2dVelocity-v1"].task
+        is registered["SafetyWalker2dVelocityGymnasium-v1"].task
+    )
     torch.testing.assert_close(a.reset()["observation"], b.reset()["observation"])
 
 

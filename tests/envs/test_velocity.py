@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import s3rl_torchrl  # noqa: F401  (registers the tasks)
-from s3rl_torchrl.envs import TASKS, VELOCITY_TASKS, get_task, task_names
+from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, VELOCITY_TASKS, get_task, task_names
 
 # Safety-Gymnasium 1.0's thresholds and cost velocity, copied from the shared reference notes
 # (§1) rather than from the package registry, so the registry is checked against them.
@@ -85,7 +85,7 @@ def reference_velocity(info: dict, speed: str) -> float:
 
 @pytest.mark.parametrize("robot,version", sorted(REFERENCE))
 def test_cost_follows_threshold_rule_and_robot_is_unchanged(robot, version):
-    task = get_task(f"Safety{robot}Velocity-{version}").task
+    task = VELOCITY_REGISTRATIONS[f"Safety{robot}Velocity-{version}"].task
     for info_s, info_b in _rollout_pair(task.env_id, f"{robot}-v4", steps=150, seed=7):
         assert info_s["cost"] == reference_cost(info_b, robot, version)
         assert {k: v for k, v in info_s.items() if k != "cost"} == info_b
@@ -129,14 +129,15 @@ def test_swimmer_v1_uses_forward_velocity_only():
     info = {"x_velocity": 0.0, "y_velocity": 1.0}
     from s3rl_torchrl.envs import velocity_cost
 
-    v0, v1 = get_task("SafetySwimmerVelocity-v0").task, get_task("SafetySwimmerVelocity-v1").task
+    v0 = VELOCITY_REGISTRATIONS["SafetySwimmerVelocity-v0"].task
+    v1 = VELOCITY_REGISTRATIONS["SafetySwimmerVelocity-v1"].task
     assert velocity_cost(info, v0.threshold, v0.speed) == 1.0
     assert velocity_cost(info, v1.threshold, v1.speed) == 0.0
 
 
 @pytest.mark.parametrize("env_id", ["SafetyHalfCheetahVelocityMujocoV5-v1", "SafetyAntVelocityMujocoV5-v1"])
 def test_v5_variant_runs_on_v5_robot(env_id):
-    registered = TASKS[env_id]
+    registered = VELOCITY_REGISTRATIONS[env_id]
     assert registered.mujoco_version == "v5"
     env = gym.make(env_id)
     base = gym.make(registered.task.base_env_id("v5"))
@@ -158,4 +159,4 @@ def test_half_cheetah_truncates_at_1000_steps():
 def test_unknown_task_lists_valid_names():
     with pytest.raises(ValueError, match="SafetyHalfCheetahVelocity-v1") as err:
         get_task("SafetyCheetahVelocity-v1")
-    assert "Unknown velocity task 'SafetyCheetahVelocity-v1'" in str(err.value)
+    assert "Unknown task 'SafetyCheetahVelocity-v1'" in str(err.value)

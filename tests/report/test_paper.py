@@ -46,3 +46,5 @@ def test_our_task_ids_find_the_papers_gymnasium_api_ids():
     ours = paper_results_for("SafetyHalfCheetahVelocity-v1")
     assert ours == paper_results_for("SafetyHalfCheetahVelocityGymnasium-v1") and ours
     assert paper_results_for("SafetyHalfCheetahVelocity-v0") == []  # the paper ran v1 only
+    circle = paper_results_for("SafetyPointCircle1-v0")  # the paper's ...Gymnasium-v0 id
+    assert _value(circle, "Table 1", "S3RL", "reward") == (37.54, 4.44)
