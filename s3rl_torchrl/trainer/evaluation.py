@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import statistics
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import torch
@@ -19,7 +19,9 @@ class EvalResult:
     """Statistics over evaluation episodes (the keys of ``final_eval.json``).
 
     ``safe_occupancy`` is the percentage of evaluated steps whose cost is zero.
-    Standard deviations are population std (``ddof=0``), as FSRL reports.
+    Standard deviations are population std (``ddof=0``), as FSRL reports. The per-episode
+    values (``episode_*``, in evaluation order) let ``s3rl-report`` pool episodes over seeds
+    (Welch's t-test, Table 1 "over episodes"); files written before they existed lack them.
     """
 
     reward_mean: float
@@ -29,6 +31,10 @@ class EvalResult:
     length_mean: float
     safe_occupancy: float
     episodes: int
+    episode_rewards: list[float] = field(default_factory=list)
+    episode_costs: list[float] = field(default_factory=list)
+    episode_lengths: list[int] = field(default_factory=list)
+    episode_safe_steps: list[int] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -97,6 +103,10 @@ def evaluate(
         length_mean=statistics.fmean(lengths),
         safe_occupancy=100.0 * sum(safe) / sum(lengths),
         episodes=len(collected),
+        episode_rewards=rewards,
+        episode_costs=costs,
+        episode_lengths=lengths,
+        episode_safe_steps=[int(n) for n in safe],
     )
 
 

@@ -33,7 +33,9 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
+from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.objectives import make_nstep_transform, sac_lag_update
+from s3rl_torchrl.report.probe import replay_probe
 from s3rl_torchrl.trainer.builders import (
     Agent,
     build_agent,
@@ -406,6 +408,15 @@ class Trainer:
             row[f"train/{key}"] = float(value.float().mean()) if value is not None else nan
         for key in CONTRASTIVE_DIAGNOSTICS:
             row[f"contrastive/{key}"] = float(self._last_contrastive.get(key, nan))
+        # Does the policy encoder separate safe from unsafe states? A logistic regression on a
+        # class-balanced replay sample, its own seed per epoch (NaN while a class is missing).
+        probe = replay_probe(
+            self.replay_buffer,
+            get_policy_encoder(self.agent.actor),
+            seed=self.cfg.seed * 1_000_003 + c.epochs,
+            label_key=self.replay_buffer.sampler.label_key,
+        )
+        row["probe/accuracy"], row["probe/auc"] = probe.accuracy, probe.auc
         return row
 
     def _progress_postfix(self) -> dict[str, str]:

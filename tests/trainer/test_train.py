@@ -6,6 +6,7 @@ import json
 import os
 import signal
 
+import numpy as np
 import pytest
 import torch
 
@@ -15,7 +16,7 @@ from s3rl_torchrl.trainer.metrics import read_metrics
 
 FINAL_EVAL_KEYS = {
     "reward_mean", "reward_std", "cost_mean", "cost_std", "length_mean", "safe_occupancy",
-    "episodes",
+    "episodes", "episode_rewards", "episode_costs", "episode_lengths", "episode_safe_steps",
 }
 
 
@@ -43,6 +44,13 @@ def test_tiny_run_per_algo(algo, tiny_config, tmp_path):
 
     final = json.loads((tmp_path / "final_eval.json").read_text())
     assert set(final) == FINAL_EVAL_KEYS and final["episodes"] == cfg.eval.final_episodes
+    # The per-episode values are the ones the summary statistics were computed from.
+    assert len(final["episode_rewards"]) == cfg.eval.final_episodes
+    assert final["reward_mean"] == pytest.approx(np.mean(final["episode_rewards"]))
+    assert final["cost_std"] == pytest.approx(np.std(final["episode_costs"]))
+    assert final["safe_occupancy"] == pytest.approx(
+        100 * sum(final["episode_safe_steps"]) / sum(final["episode_lengths"])
+    )
     rows = read_metrics(tmp_path)
     assert [int(r["frames"]) for r in rows] == [200, 400, 600]
     assert (tmp_path / "checkpoints" / "latest" / "state.pt").is_file()

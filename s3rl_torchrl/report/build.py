@@ -1,0 +1,366 @@
+"""``report.md`` and its figures from a directory of runs: what ``s3rl-report`` does."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
+from s3rl_torchrl.report.probe import ProbeResult, linear_probe
+from s3rl_torchrl.report.runs import (
+    RUN_SPECIFIC_KEYS,
+    RunGroup,
+    config_differences,
+    find_runs,
+    group_runs,
+)
+from s3rl_torchrl.report.stats import MeanStd, TestResult, compare_groups, summarize
+
+__all__ = ["build_report", "Report"]
+
+REPORT_FILE = "report.md"
+OVER_LIMIT = "⚠"
+
+
+@dataclass
+class Report:
+    path: Path  # report.md
+    figures: list[Path] = field(default_factory=list)
+    groups: list[RunGroup] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def _ms(value: MeanStd, digits: int = 2) -> str:
+    if value.n == 0 or math.isnan(value.mean):
+        return "–"
+    if math.isnan(value.std):
+        return f"{value.mean:.{digits}f}"
+    return f"{value.mean:.{digits}f} ± {value.std:.{digits}f}"
+
+
+def _num(x: float, digits: int = 2) -> str:
+    return "–" if x is None or math.isnan(x) else f"{x:.{digits}f}"
+
+
+def _p(p: float) -> str:
+    if math.isnan(p):
+        return "–"
+    return f"= {p:.2g}" if p >= 1e-4 else "< 1e-4"
+
+
+def _test_cell(result: TestResult) -> str:
+    if math.isnan(result.pvalue):
+        return f"– ({result.note}; {result.n})" if result.n != "-" else f"– ({result.note})"
+    note = f"; {result.note}" if result.note else ""
+    return (
+        f"p {_p(result.pvalue)}, CI [{_num(result.ci_low)}, {_num(result.ci_high)}] "
+        f"({result.n}{note})"
+    )
+
+
+def _by_task(groups: Sequence[RunGroup]) -> dict[str, list[RunGroup]]:
+    out: dict[str, list[RunGroup]] = {}
+    for group in groups:
+        out.setdefault(group.task, []).append(group)
+    return out
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "") -> list[str]:
+    align = align or "l" * len(header)
+    sep = ["---:" if a == "r" else "---" for a in align]
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines
+
+
+def _table1(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+    rows = []
+    for task, groups in by_task.items():
+        for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
+            if not group.finished:
+                continue
+            s = summarize(group)
+            marker = f" {OVER_LIMIT}" if s.over_limit else ""
+            rows.append([
+                task, group.label, str(len(s.seeds)),
+                _ms(s.reward_seeds), _ms(s.reward_episodes),
+                _ms(s.cost_seeds) + marker, _ms(s.cost_episodes),
+                f"{s.cost_limit:g}", _ms(s.length_seeds, 1), _ms(s.safe_occupancy_seeds, 1),
+            ])
+    header = ["task", "algo", "seeds", "reward (seeds)", "reward (episodes)", "cost (seeds)",
+              "cost (episodes)", "cost limit", "length", "safe steps (%)"]
+    return _table(header, rows, "llrrrrrrrr")
+
+
+def _differences(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+    rows = []
+    for task, groups in by_task.items():
+        refs = [g for g in groups if g.algo == reference and g.finished]
+        for ref in refs:
+            for base in groups:
+                if base.algo == reference or not base.finished:
+                    continue
+                for metric in ("reward", "cost"):
+                    paired, welch = compare_groups(ref, base, metric)
+                    rows.append([
+                        task, metric, f"{ref.label} − {base.label}",
+                        _num(paired.difference), _test_cell(paired),
+                        _num(welch.difference), _test_cell(welch),
+                    ])
+    if not rows:
+        return [f"No task has finished runs of both {reference} and another algo."]
+    header = ["task", "metric", "difference", "over seeds", "paired t-test",
+              "over episodes", "Welch t-test"]
+    return _table(header, rows, "lllrlrl")
+
+
+def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
+    rows = []
+    for task, groups in by_task.items():
+        values = paper_results_for(task)
+        if not values:
+            continue
+        for group in groups:
+            if not group.finished or group.extra:
+                continue
+            s = summarize(group)
+            mine = [v for v in values if v.algo == group.algo and v.metric in ("reward", "cost")]
+            for table in sorted({v.table for v in mine}):
+                paper = {v.metric: v for v in mine if v.table == table}
+                lengths = [v for v in values if v.table == table and v.metric == "length"]
+                setting = next(iter(paper.values()))
+                rows.append([
+                    task, group.algo, f"{table} ({setting.method}, {setting.setting})",
+                    _ms(s.reward_episodes), _paper(paper.get("reward")),
+                    _ms(s.cost_episodes), _paper(paper.get("cost")),
+                    _ms(s.length_seeds, 1), _paper(lengths[0] if lengths else None, 1),
+                ])
+    if not rows:
+        return ["The paper reports none of these tasks (or none of these algos)."]
+    header = ["task", "algo", "paper's row", "reward (ours)", "reward (paper)", "cost (ours)",
+              "cost (paper)", "length (ours)", "length (paper)"]
+    return _table(header, rows, "lllrrrrrr")
+
+
+def _paper(value, digits: int = 2) -> str:
+    if value is None:
+        return "–"
+    return f"{value.mean:.{digits}f} ± {value.std:.{digits}f}"
+
+
+def _occupancy(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+    rows = []
+    for task, groups in by_task.items():
+        finished = {g.label: summarize(g) for g in groups if g.finished}
+        ref = next((s for g, s in zip(groups, map(summarize, groups))
+                    if g.algo == reference and g.finished), None)
+        for label, s in sorted(finished.items(), key=lambda kv: (kv[0] != reference, kv[0])):
+            diff = "" if ref is None or label == reference else (
+                f"{ref.safe_occupancy_seeds.mean - s.safe_occupancy_seeds.mean:+.1f}"
+            )
+            paper = [v for v in paper_results_for(task) if v.metric == "safe_occupancy_diff_pp"]
+            paper_diff = f"{paper[0].mean:+.1f}" if paper and label == "sac_lag" else ""
+            rows.append([task, label, _ms(s.safe_occupancy_seeds, 1), diff, paper_diff])
+    header = ["task", "algo", "safe steps (%)", f"{reference} minus this (pp)",
+              "paper: S3RL minus SAC-LAG (pp)"]
+    return _table(header, rows, "llrrr")
+
+
+def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:
+    """The last logged probe accuracy / AUC of each finished run, over seeds."""
+    acc, auc = [], []
+    for run in group.finished:
+        a = [v for v in run.column("probe/accuracy")[1] if not math.isnan(v)]
+        u = [v for v in run.column("probe/auc")[1] if not math.isnan(v)]
+        if a:
+            acc.append(a[-1])
+        if u:
+            auc.append(u[-1])
+    return MeanStd.of(acc, ddof=1), MeanStd.of(auc, ddof=1)
+
+
+def _embedding_panels(
+    by_task: dict[str, list[RunGroup]], reference: str, episodes: int, notes: list[str]
+) -> tuple[dict, list[list[str]]]:
+    """Rollouts of one checkpoint per group (the lowest finished seed), embedded and probed."""
+    from s3rl_torchrl.report.embeddings import rollout_embeddings
+
+    panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray, ProbeResult]]] = {}
+    rows = []
+    for task, groups in by_task.items():
+        for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
+            run = next((r for r in group.finished if r.checkpoint is not None), None)
+            train_acc, train_auc = _training_probe(group)
+            if run is None:
+                notes.append(f"Figure 4: no finished run of {task} / {group.label} has a "
+                             "checkpoint (checkpoints/latest); left out.")
+                continue
+            max_steps = run.config.get("eval", {}).get("max_steps")  # None: the task's length
+            data = rollout_embeddings(run.checkpoint, episodes=episodes, max_steps=max_steps)
+            probe = linear_probe(data.embeddings, data.safe, seed=0)
+            panels.setdefault(task, {})[f"{group.label} (seed {run.seed})"] = (
+                data.embeddings, data.safe, probe,
+            )
+            rows.append([
+                task, group.label, str(run.seed), f"{probe.n_safe} / {probe.n_unsafe}",
+                f"{_num(probe.accuracy)} ({_num(probe.chance)})", _num(probe.auc),
+                _ms(train_acc), _ms(train_auc),
+            ])
+    return panels, rows
+
+
+def build_report(
+    root: str | Path,
+    out: str | Path | None = None,
+    reference: str = "s3rl",
+    group_by: Sequence[str] = (),
+    embeddings: bool = True,
+    embedding_episodes: int = 2,
+    tsne_states: int = 1000,
+    command: str | None = None,
+) -> Report:
+    """Find the runs below ``root``, write ``<out>/report.md`` and its figures (PNG and SVG).
+
+    Args:
+        root: a run, a Hydra multirun, or any directory with runs below it.
+        out: the report directory (default ``<root>/report``).
+        reference: the algo compared against every other one (S3RL).
+        group_by: config keys (dotted) that split runs of one task and algo into groups.
+        embeddings: roll out checkpoints for Figure 4 and the probe table (slower: a few
+            seconds per checkpoint plus t-SNE).
+        embedding_episodes: evaluation env copies rolled out per checkpoint.
+        tsne_states: at most this many states per t-SNE panel.
+        command: the command line shown in the report.
+    """
+    from s3rl_torchrl.report import figures
+
+    root = Path(root)
+    out = Path(out) if out is not None else root / "report"
+    runs = find_runs(root)
+    groups = group_runs(runs, group_by)
+    by_task = _by_task(groups)
+    report = Report(out / REPORT_FILE, groups=groups)
+    out.mkdir(parents=True, exist_ok=True)
+
+    finished = [r for r in runs if r.finished]
+    lines = [
+        "# S3RL results report",
+        "",
+        f"Generated by `{command or f's3rl-report {root}'}` from {len(runs)} runs below "
+        f"`{root}` ({len(finished)} finished) in {len(groups)} groups (task × algo"
+        + (f" × {', '.join(group_by)}" if group_by else "") + ").",
+        "",
+    ]
+    unfinished = [r for r in runs if not r.finished]
+    if unfinished:
+        lines += ["## Unfinished runs", "",
+                  "No `final_eval.json`: left out of the tables, kept in the learning curves.",
+                  ""]
+        lines += [f"- `{r.path}`: {r.task} / {r.algo} seed {r.seed}, "
+                  f"{r.frames} of {r.total_frames} frames" for r in unfinished]
+        lines.append("")
+    if not finished:
+        report.notes.append("No run is finished: the tables are empty.")
+
+    # Algos of one task compared with each other should differ in the algo only.
+    for task, task_groups in by_task.items():
+        firsts = [g.runs[0] for g in task_groups]
+        diff = config_differences(firsts, (*RUN_SPECIFIC_KEYS, "algo", *group_by))
+        if diff:
+            keys = ", ".join(f"`{k}` ({' / '.join(map(str, v))})" for k, v in diff.items())
+            report.notes.append(
+                f"{task}: the algos compared were run with different settings besides the "
+                f"algo: {keys} (in the order {', '.join(g.label for g in task_groups)})."
+            )
+
+    lines += [
+        "## Table 1: final deterministic evaluation",
+        "",
+        "Mean ± std of the final evaluation (`final_eval.json`). *seeds*: one value per seed "
+        "(its mean over episodes), sample std over seeds. *episodes*: all evaluation episodes "
+        "of all seeds pooled (population std), as the paper's Table 1 reports. "
+        f"{OVER_LIMIT}: mean cost over seeds above the task's cost limit.",
+        "",
+        *_table1(by_task, reference),
+        "",
+        f"## {reference} vs the other algos",
+        "",
+        f"Difference of means ({reference} minus the other). Paired t-test over the seeds both "
+        "algos ran (runs paired by seed; seeds present for only one are left out); Welch's "
+        "t-test over the pooled evaluation episodes; 95% confidence intervals of the "
+        "difference (scipy.stats `ttest_rel` / `ttest_ind(equal_var=False)`).",
+        "",
+        *_differences(by_task, reference),
+        "",
+        "## Comparison with the paper",
+        "",
+        f"The paper's numbers (\"{PAPER_TITLE}\", Table 1: 10 evaluation episodes after "
+        "training; Table 2: ablation after 100 epochs) beside ours (pooled episodes). Ours are "
+        "whatever these runs' settings are: compare only runs at the paper's settings "
+        "(`experiment=paper`).",
+        "",
+        *_paper_comparison(by_task),
+        "",
+    ]
+
+    report.figures += figures.learning_curves(by_task, out, reference)
+    lines += [
+        "## Figure 2: learning curves",
+        "",
+        "Evaluation reward and cost per epoch (`metrics.csv`) against environment steps; mean "
+        "over seeds, shaded ± std; every run, unfinished ones included; dashed: cost limit.",
+        "",
+        "![Figure 2](figure2_learning_curves.png)",
+        "",
+    ]
+    if finished:
+        report.figures += figures.safe_occupancy_bars(by_task, out, reference)
+        lines += [
+            "## Figure 3: safe-state occupancy",
+            "",
+            "Percentage of final-evaluation steps with zero cost, mean ± std over seeds; pp: "
+            f"percentage points, {reference} minus the other algo.",
+            "",
+            "![Figure 3](figure3_safe_occupancy.png)",
+            "",
+            *_occupancy(by_task, reference),
+            "",
+        ]
+
+    lines += ["## Figure 4: policy-encoder embeddings and linear probe", ""]
+    if embeddings and finished:
+        panels, rows = _embedding_panels(by_task, reference, embedding_episodes, report.notes)
+        if panels:
+            report.figures += figures.embedding_tsne(panels, out, max_states=tsne_states)
+            lines += [
+                f"States of {embedding_episodes} deterministic evaluation rollouts of one "
+                "checkpoint per algo (`checkpoints/latest` of the lowest finished seed), "
+                "embedded by the policy encoder and coloured by their label (safe: the step "
+                f"from that state costs nothing; t-SNE of at most {tsne_states} of them, "
+                "drawn with a fixed seed). Probe (on all of them): a logistic regression "
+                "predicting the "
+                "label from the embedding, accuracy (chance: majority class) and ROC AUC on a "
+                "held-out 30%. *training*: the `probe/accuracy` and `probe/auc` columns of "
+                "`metrics.csv` at the last epoch (class-balanced replay-buffer sample), mean ± "
+                "std over finished seeds.",
+                "",
+                "![Figure 4](figure4_embedding_tsne.png)",
+                "",
+                *_table(["task", "algo", "seed", "states safe / unsafe", "probe accuracy "
+                         "(chance)", "probe AUC", "training probe accuracy",
+                         "training probe AUC"], rows, "lllrrrrr"),
+                "",
+            ]
+        else:
+            lines += ["No checkpoint to roll out.", ""]
+    else:
+        lines += ["Not drawn (`--no-embeddings`, or no finished run).", ""]
+
+    if report.notes:
+        lines += ["## Notes", "", *[f"- {note}" for note in report.notes], ""]
+    report.path.write_text("\n".join(lines))
+    return report

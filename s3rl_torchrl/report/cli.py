@@ -1,0 +1,72 @@
+"""``s3rl-report``: the paper's Table 1 and Figures 2-4 from a directory of runs."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+
+from s3rl_torchrl.report.runs import ReportError
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return value
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="s3rl-report",
+        description=(
+            "Find every run (a directory with config.json and metrics.csv) below RUNS, group "
+            "them by task and algo, and write report.md with Table 1, the S3RL-vs-baseline "
+            "tests, the paper's numbers and Figures 2-4 (PNG and SVG)."
+        ),
+    )
+    parser.add_argument("runs", help="a run, a Hydra multirun/sweep dir or an outputs dir")
+    parser.add_argument("--out", default=None, help="report directory (default: RUNS/report)")
+    parser.add_argument("--reference", default="s3rl",
+                        help="the algo compared with every other one (default: s3rl)")
+    parser.add_argument("--group-by", action="append", default=[], metavar="KEY",
+                        help="a config key (dotted, e.g. algo.pid.kp) that splits the runs of "
+                             "one task and algo into separate groups; repeatable")
+    parser.add_argument("--no-embeddings", action="store_true",
+                        help="skip Figure 4 and the probe table (no checkpoint rollouts)")
+    parser.add_argument("--embedding-episodes", type=_positive, default=2,
+                        help="evaluation env copies rolled out per checkpoint (default: 2)")
+    parser.add_argument("--tsne-states", type=_positive, default=1000,
+                        help="at most this many states per t-SNE panel (default: 1000; "
+                             "t-SNE time grows faster than linearly)")
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    from s3rl_torchrl.report.build import build_report
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        report = build_report(
+            args.runs,
+            args.out,
+            reference=args.reference,
+            group_by=args.group_by,
+            embeddings=not args.no_embeddings,
+            embedding_episodes=args.embedding_episodes,
+            tsne_states=args.tsne_states,
+            command=shlex.join(["s3rl-report", *argv]),
+        )
+    except ReportError as err:
+        print(f"s3rl-report: error: {err}", file=sys.stderr)
+        return 2
+    for note in report.notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(f"Wrote {report.path} and {len(report.figures)} figure files in {report.path.parent}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

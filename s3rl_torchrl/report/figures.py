@@ -1,0 +1,195 @@
+"""Figures 2-4 of the paper from grouped runs (matplotlib, Agg backend; PNG and SVG).
+
+Needs the ``plots`` extra (``pip install -e ".[plots]"``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from s3rl_torchrl.report.probe import ProbeResult
+from s3rl_torchrl.report.runs import RunGroup
+from s3rl_torchrl.report.stats import learning_curve, summarize
+
+__all__ = ["learning_curves", "safe_occupancy_bars", "embedding_tsne", "FORMATS"]
+
+FORMATS = ("png", "svg")
+SAFE_COLOUR, UNSAFE_COLOUR = "#2ca02c", "#d62728"
+
+
+def _pyplot():
+    try:
+        import matplotlib
+    except ImportError as err:
+        raise ImportError(
+            "s3rl-report draws its figures with matplotlib: pip install -e \".[plots]\""
+        ) from err
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, out_dir: Path, name: str) -> list[Path]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for fmt in FORMATS:
+        path = out_dir / f"{name}.{fmt}"
+        fig.savefig(path, dpi=150, bbox_inches="tight")
+        paths.append(path)
+    fig.clf()
+    return paths
+
+
+def _colours(labels: Sequence[str], reference: str) -> dict[str, str]:
+    """The reference algo in blue everywhere, the others in the following tab10 colours."""
+    palette = ["#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22"]
+    others = [label for label in labels if label != reference]
+    colours = {reference: palette[0]}
+    colours.update({label: palette[1 + i % (len(palette) - 1)] for i, label in enumerate(others)})
+    return colours
+
+
+def _ordered(groups: Sequence[RunGroup], reference: str) -> list[RunGroup]:
+    return sorted(groups, key=lambda g: (g.algo != reference, g.label))
+
+
+def learning_curves(
+    by_task: Mapping[str, Sequence[RunGroup]], out_dir: Path, reference: str = "s3rl"
+) -> list[Path]:
+    """Figure 2: evaluation reward (top) and cost (bottom) against env frames, one column per
+    task; mean over seeds, shaded +- std; the task's cost limit as a dashed line."""
+    plt = _pyplot()
+    tasks = list(by_task)
+    fig, axes = plt.subplots(
+        2, len(tasks), figsize=(4.2 * len(tasks), 6.4), squeeze=False, sharex="col"
+    )
+    labels = sorted({g.label for groups in by_task.values() for g in groups})
+    colours = _colours(labels, reference)
+    for col, task in enumerate(tasks):
+        for group in _ordered(by_task[task], reference):
+            for row, column in enumerate(("eval/reward", "eval/cost")):
+                frames, mean, std = learning_curve(group, column)
+                if not len(frames):
+                    continue
+                ax = axes[row, col]
+                colour = colours[group.label]
+                seeds = len(group.runs)
+                ax.plot(frames, mean, color=colour, label=f"{group.label} ({seeds} seeds)")
+                ax.fill_between(frames, mean - std, mean + std, color=colour, alpha=0.2, lw=0)
+        limit = by_task[task][0].cost_limit
+        if not math.isnan(limit):
+            axes[1, col].axhline(limit, color="black", ls="--", lw=1, label=f"cost limit {limit:g}")
+        axes[0, col].set_title(task, fontsize=10)
+        axes[0, col].set_ylabel("evaluation reward")
+        axes[1, col].set_ylabel("evaluation cost")
+        axes[1, col].set_xlabel("environment steps")
+        axes[1, col].legend(fontsize=8)
+        for ax in axes[:, col]:
+            ax.grid(alpha=0.3)
+    fig.suptitle("Learning curves (deterministic evaluation; mean ± std over seeds)")
+    fig.tight_layout()
+    paths = _save(fig, out_dir, "figure2_learning_curves")
+    plt.close(fig)
+    return paths
+
+
+def safe_occupancy_bars(
+    by_task: Mapping[str, Sequence[RunGroup]], out_dir: Path, reference: str = "s3rl"
+) -> list[Path]:
+    """Figure 3: safe-state occupancy (% of final-evaluation steps with zero cost) per task and
+    algo (mean over finished seeds, +- std), each baseline bar annotated with the reference's
+    difference in percentage points."""
+    plt = _pyplot()
+    tasks = list(by_task)
+    labels = sorted({g.label for groups in by_task.values() for g in groups})
+    labels = sorted(labels, key=lambda label: (label != reference, label))
+    colours = _colours(labels, reference)
+    width = 0.8 / len(labels)
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.6 * len(tasks) * len(labels)), 4.2))
+    in_legend: set[str] = set()
+    for t, task in enumerate(tasks):
+        groups = {g.label: g for g in by_task[task]}
+        occupancy = {
+            label: summarize(g).safe_occupancy_seeds for label, g in groups.items() if g.finished
+        }
+        ref = occupancy.get(reference)
+        for i, label in enumerate(labels):
+            if label not in occupancy:
+                continue
+            value = occupancy[label]
+            x = t + (i - (len(labels) - 1) / 2) * width
+            err = 0.0 if math.isnan(value.std) else value.std
+            ax.bar(x, value.mean, width, yerr=err, color=colours[label], capsize=3,
+                   label=None if label in in_legend else label)
+            in_legend.add(label)
+            text = f"{value.mean:.1f}%"
+            if ref is not None and label != reference:
+                text += f"\n{ref.mean - value.mean:+.1f} pp"
+            ax.annotate(text, (x, value.mean + err), xytext=(0, 3), textcoords="offset points",
+                        ha="center", va="bottom", fontsize=7)
+    ax.set_xticks(range(len(tasks)), tasks, fontsize=8)
+    ax.set_ylabel("safe-state occupancy (%)")
+    ax.set_ylim(0, 118)
+    ax.set_title(f"Safe-state occupancy in final evaluation (pp: {reference} minus that bar)")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    paths = _save(fig, out_dir, "figure3_safe_occupancy")
+    plt.close(fig)
+    return paths
+
+
+def embedding_tsne(
+    panels: Mapping[str, Mapping[str, tuple[np.ndarray, np.ndarray, ProbeResult]]],
+    out_dir: Path,
+    max_states: int = 1000,
+    seed: int = 0,
+) -> list[Path]:
+    """Figure 4: t-SNE (scikit-learn) of policy-encoder embeddings, safe vs unsafe states.
+
+    ``panels[task][label] = (embeddings [N, d], safe [N], probe)``: one row per task, one panel
+    per algo (the reference first). At most ``max_states`` states per panel, drawn with a
+    seeded generator; the panel's title gives the linear probe's held-out accuracy / AUC.
+    """
+    from sklearn.manifold import TSNE
+    from threadpoolctl import threadpool_limits
+
+    plt = _pyplot()
+    tasks = list(panels)
+    cols = max(len(p) for p in panels.values())
+    fig, axes = plt.subplots(len(tasks), cols, figsize=(4.2 * cols, 4.2 * len(tasks)),
+                             squeeze=False)
+    for r, task in enumerate(tasks):
+        for c, (label, (z, safe, probe)) in enumerate(panels[task].items()):
+            ax = axes[r, c]
+            rng = np.random.default_rng(seed)
+            keep = np.sort(rng.permutation(len(z))[:max_states])
+            z, safe = z[keep], safe[keep].astype(bool)
+            perplexity = float(min(30.0, max(2.0, (len(z) - 1) / 3)))
+            # One OpenMP thread: measured 2.5x faster than the default on 2 busy cores.
+            with threadpool_limits(limits=1):
+                xy = TSNE(n_components=2, perplexity=perplexity, init="pca",
+                          random_state=seed).fit_transform(z.astype(np.float64))
+            ax.scatter(*xy[safe].T, s=4, c=SAFE_COLOUR, label=f"safe ({safe.sum()})", alpha=0.6)
+            ax.scatter(*xy[~safe].T, s=4, c=UNSAFE_COLOUR, label=f"unsafe ({(~safe).sum()})",
+                       alpha=0.8)
+            probe_text = (
+                f"probe acc {probe.accuracy:.2f} (chance {probe.chance:.2f}), AUC {probe.auc:.2f}"
+                if probe.fitted else "probe: too few states of one class"
+            )
+            ax.set_title(f"{task}\n{label}\n{probe_text}", fontsize=8)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.legend(fontsize=7, markerscale=3)
+        for c in range(len(panels[task]), cols):
+            axes[r, c].axis("off")
+    fig.suptitle("t-SNE of policy-encoder embeddings of evaluation states")
+    fig.tight_layout()
+    paths = _save(fig, out_dir, "figure4_embedding_tsne")
+    plt.close(fig)
+    return paths

@@ -1,0 +1,252 @@
+"""Find training runs below a directory and group them by task and algorithm.
+
+A run is a directory holding ``config.json`` and ``metrics.csv`` (what ``s3rl-train`` writes,
+whether as a single run, a Hydra multirun job or one seed of a multi-seed group). It is
+*finished* when its ``final_eval.json`` exists: only finished runs enter the final tables,
+every run enters the learning curves.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "ReportError",
+    "Run",
+    "RunGroup",
+    "find_runs",
+    "group_runs",
+    "flatten",
+    "config_differences",
+    "RUN_SPECIFIC_KEYS",
+]
+
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.csv"
+FINAL_EVAL_FILE = "final_eval.json"
+CHECKPOINT_DIR = Path("checkpoints") / "latest"
+
+#: Config keys that may differ between the seeds of one group: they do not change what is
+#: learned (how a run is logged, resumed, threaded or compiled), or are the seed itself.
+RUN_SPECIFIC_KEYS = (
+    "seed",
+    "resume",
+    "logger",
+    "threads",
+    "compile",
+    "device",
+    "save_interval",
+    "eval.random_baseline",
+)
+
+
+class ReportError(ValueError):
+    """The runs cannot be reported as asked (nothing found, mixed configs, ...)."""
+
+
+@dataclass
+class Run:
+    """One run directory, read."""
+
+    path: Path
+    config: dict[str, Any]
+    metrics: list[dict[str, float]]  # metrics.csv rows, values as floats (NaN if empty)
+    final: dict[str, Any] | None  # final_eval.json, None while unfinished
+
+    @property
+    def task(self) -> str:
+        return self.config["task"]["name"]
+
+    @property
+    def algo(self) -> str:
+        return self.config["algo"]["name"]
+
+    @property
+    def seed(self) -> int:
+        return int(self.config["seed"])
+
+    @property
+    def cost_limit(self) -> float:
+        return float(self.config["task"].get("cost_limit", math.nan))
+
+    @property
+    def finished(self) -> bool:
+        return self.final is not None
+
+    @property
+    def frames(self) -> int:
+        """Frames reached (the last metrics row), 0 before the first epoch."""
+        return int(self.metrics[-1]["frames"]) if self.metrics else 0
+
+    @property
+    def total_frames(self) -> int:
+        return int(self.config["collector"]["total_frames"])
+
+    @property
+    def checkpoint(self) -> Path | None:
+        path = self.path / CHECKPOINT_DIR
+        return path if path.is_dir() else None
+
+    def column(self, name: str) -> tuple[list[float], list[float]]:
+        """(frames, values) of a metrics.csv column (rows without the column are skipped)."""
+        rows = [r for r in self.metrics if name in r]
+        return [r["frames"] for r in rows], [r[name] for r in rows]
+
+
+@dataclass
+class RunGroup:
+    """The seeds of one (task, algo[, --group-by values]) configuration."""
+
+    task: str
+    algo: str
+    runs: list[Run]
+    extra: tuple[tuple[str, Any], ...] = ()  # the --group-by keys and their values
+    cost_limit: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.runs = sorted(self.runs, key=lambda r: r.seed)
+        self.cost_limit = self.runs[0].cost_limit
+
+    @property
+    def label(self) -> str:
+        """The algo, plus the --group-by values that set this group apart."""
+        if not self.extra:
+            return self.algo
+        return self.algo + " (" + ", ".join(f"{k}={v}" for k, v in self.extra) + ")"
+
+    @property
+    def finished(self) -> list[Run]:
+        return [r for r in self.runs if r.finished]
+
+    @property
+    def unfinished(self) -> list[Run]:
+        return [r for r in self.runs if not r.finished]
+
+
+def _read_metrics(path: Path) -> list[dict[str, float]]:
+    with path.open(newline="") as f:
+        return [
+            {k: float(v) if v not in ("", None) else math.nan for k, v in row.items()}
+            for row in csv.DictReader(f)
+        ]
+
+
+def read_run(path: str | Path) -> Run:
+    path = Path(path)
+    try:
+        config = json.loads((path / CONFIG_FILE).read_text())
+        final_path = path / FINAL_EVAL_FILE
+        final = json.loads(final_path.read_text()) if final_path.is_file() else None
+        metrics = _read_metrics(path / METRICS_FILE)
+    except (OSError, ValueError) as err:
+        raise ReportError(f"Cannot read the run in {path}: {err}") from err
+    for key in ("task", "algo", "seed", "collector"):
+        if key not in config:
+            raise ReportError(
+                f"{path / CONFIG_FILE} has no {key!r} entry: not a config written by s3rl-train."
+            )
+    return Run(path, config, metrics, final)
+
+
+def find_runs(root: str | Path) -> list[Run]:
+    """Every run directory at or below ``root`` (sorted by path); an error if there is none."""
+    root = Path(root)
+    if not root.is_dir():
+        raise ReportError(f"{root} is not a directory.")
+    run_dirs = sorted(
+        p.parent
+        for p in root.rglob(CONFIG_FILE)
+        if (p.parent / METRICS_FILE).is_file() and "checkpoints" not in p.relative_to(root).parts
+    )
+    if not run_dirs:
+        raise ReportError(
+            f"No runs found below {root}: a run is a directory with {CONFIG_FILE} and "
+            f"{METRICS_FILE}, as s3rl-train writes them (outputs/ or multirun/ by default)."
+        )
+    return [read_run(p) for p in run_dirs]
+
+
+def flatten(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}`` (lists stay values)."""
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def _ignored(key: str, ignore: Iterable[str]) -> bool:
+    return any(key == k or key.startswith(k + ".") for k in ignore)
+
+
+def config_differences(
+    runs: Sequence[Run], ignore: Iterable[str] = RUN_SPECIFIC_KEYS
+) -> dict[str, list[Any]]:
+    """The config keys whose values differ between ``runs`` -> each run's value (in order)."""
+    ignore = tuple(ignore)
+    flats = [flatten(r.config) for r in runs]
+    keys = sorted(set().union(*flats))
+    missing = object()
+    diff = {}
+    for key in keys:
+        if _ignored(key, ignore):
+            continue
+        values = [f.get(key, missing) for f in flats]
+        if any(v != values[0] for v in values[1:]):
+            diff[key] = ["<missing>" if v is missing else v for v in values]
+    return diff
+
+
+def group_runs(runs: Sequence[Run], group_by: Sequence[str] = ()) -> list[RunGroup]:
+    """Group runs by task, algo and the ``group_by`` config keys (dotted, e.g. ``algo.pid.kp``).
+
+    Raises :class:`ReportError` when the runs of a group differ in a config key other than the
+    run-specific ones (:data:`RUN_SPECIFIC_KEYS`), naming the keys so they can be passed as
+    ``group_by``, or when one seed appears twice in a group.
+    """
+    buckets: dict[tuple, list[Run]] = {}
+    for run in runs:
+        flat = flatten(run.config)
+        for key in group_by:
+            if key not in flat:
+                raise ReportError(
+                    f"--group-by {key!r}: no such config key in {run.path / CONFIG_FILE}."
+                )
+        extra = tuple((key, flat[key]) for key in group_by)
+        buckets.setdefault((run.task, run.algo, extra), []).append(run)
+
+    groups = []
+    for (task, algo, extra), members in sorted(buckets.items(), key=lambda kv: str(kv[0])):
+        diff = config_differences(members, (*RUN_SPECIFIC_KEYS, *group_by))
+        if diff:
+            lines = "\n".join(
+                f"  {key}: "
+                + ", ".join(f"{v!r} ({r.path})" for v, r in zip(values, members))
+                for key, values in diff.items()
+            )
+            raise ReportError(
+                f"The runs of task={task} algo={algo} differ in more than the seed, so they are "
+                f"not seeds of one experiment:\n{lines}\nReport them separately (point "
+                f"s3rl-report at a narrower directory) or split them with "
+                + " ".join(f"--group-by {key}" for key in diff) + "."
+            )
+        seeds: dict[int, Run] = {}
+        for run in members:
+            if run.seed in seeds:
+                raise ReportError(
+                    f"Seed {run.seed} of task={task} algo={algo} appears twice: "
+                    f"{seeds[run.seed].path} and {run.path}. Keep one of them below the "
+                    "reported directory."
+                )
+            seeds[run.seed] = run
+        groups.append(RunGroup(task, algo, members, extra))
+    return groups

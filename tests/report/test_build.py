@@ -1,0 +1,179 @@
+"""report.md and its figures: synthetic runs (numbers chosen here), the CLI, and real tiny runs
+(checkpoint rollouts for Figure 4, the training-time probe column)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from scipy import stats
+
+from s3rl_torchrl.report.build import build_report
+from s3rl_torchrl.report.cli import main
+from s3rl_torchrl.report.runs import read_run
+from s3rl_torchrl.trainer import register_configs, train, validate
+
+CONFIG_DIR = str(Path(__file__).resolve().parents[2] / "configs")
+TASK = "SafetyHalfCheetahVelocity-v1"
+
+
+def _non_empty(path: Path) -> bool:
+    return path.is_file() and path.stat().st_size > 0
+
+
+def _sweep(tmp_path, make_run) -> dict:
+    """Two algos x three seeds; seed 4 of s3rl unfinished. sac_lag's cost exceeds the limit."""
+    costs = {"s3rl": [0.0, 2.0, 1.0, 3.0], "sac_lag": [12.0, 15.0, 11.0, 14.0]}
+    rewards = {}
+    for algo in ("s3rl", "sac_lag"):
+        for seed in (1, 2, 3):
+            r = [100.0 + 10 * seed + i + (4 + seed if algo == "s3rl" else 0) for i in range(4)]
+            rewards[algo, seed] = r
+            episodes = {"rewards": r, "costs": costs[algo], "lengths": [50] * 4,
+                        "safe_steps": [50, 48, 49, 47] if algo == "s3rl" else [40] * 4}
+            make_run(tmp_path / "sweep" / f"{algo}_seed{seed}", TASK, algo, seed, episodes)
+    make_run(tmp_path / "sweep" / "s3rl_seed4", TASK, "s3rl", 4, finished=False)
+    return rewards
+
+
+def test_report_on_synthetic_runs(tmp_path, make_run):
+    rewards = _sweep(tmp_path, make_run)
+    report = build_report(tmp_path / "sweep", tmp_path / "report")
+    text = report.path.read_text()
+
+    # Table 1 rows, by hand: s3rl per-seed means 116.5, 127.5, 138.5; pooled over 12 episodes.
+    s3rl_pooled = np.concatenate([rewards["s3rl", s] for s in (1, 2, 3)])
+    seed_means = [np.mean(rewards["s3rl", s]) for s in (1, 2, 3)]
+    row = next(line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | 3 |"))
+    assert f"{np.mean(seed_means):.2f} ± {np.std(seed_means, ddof=1):.2f}" in row
+    assert f"{s3rl_pooled.mean():.2f} ± {s3rl_pooled.std():.2f}" in row
+    assert "⚠" not in row  # cost 1.5 < 10
+    lag = next(line for line in text.splitlines() if line.startswith(f"| {TASK} | sac_lag |"))
+    assert "13.00 ± 0.00 ⚠" in lag  # every seed's mean cost is 13 > 10
+
+    # The unfinished run: listed, out of the table (3 seeds), in the curves.
+    assert "## Unfinished runs" in text and "s3rl seed 4, 400 of 600 frames" in text
+
+    # Differences: Welch over the pooled episodes as scipy computes it.
+    lag_pooled = np.concatenate([rewards["sac_lag", s] for s in (1, 2, 3)])
+    welch = stats.ttest_ind(s3rl_pooled, lag_pooled, equal_var=False)
+    ci = welch.confidence_interval(0.95)
+    diff_row = next(line for line in text.splitlines() if "| reward | s3rl − sac_lag |" in line)
+    assert f"p = {welch.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] (12 vs 12 episodes)" in (
+        diff_row
+    )
+    # Paired over seeds (differences 5, 6, 7), as scipy computes it.
+    paired = stats.ttest_rel(seed_means, [np.mean(rewards["sac_lag", s]) for s in (1, 2, 3)])
+    ci = paired.confidence_interval(0.95)
+    assert f"| 6.00 | p = {paired.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] (3 pairs) |" in (
+        diff_row
+    )
+    # Every seed has the same costs: the seed-paired cost differences are all -11.5, scipy
+    # says t = -inf, p = 0, and the table flags it.
+    cost_row = next(line for line in text.splitlines() if "| cost | s3rl − sac_lag |" in line)
+    assert "| -11.50 | p < 1e-4, CI [-11.50, -11.50] (3 pairs; no variance) |" in cost_row
+
+    # The paper's Table 1 numbers for this task (our v1 id = the paper's Gymnasium-API id).
+    assert "| Table 1 (S3RL, Lag) |" in text and "2828.95 ± 50.71" in text
+    # Figure 3's difference in percentage points: (194 - 160) / 200 * 100 = 17.0
+    # (the paper quotes no Figure 3 difference for HalfCheetah: last column empty)
+    assert f"| {TASK} | sac_lag | 80.0 ± 0.0 | +17.0 |  |" in text
+
+    names = {p.name for p in report.figures}
+    for stem in ("figure2_learning_curves", "figure3_safe_occupancy"):
+        assert {f"{stem}.png", f"{stem}.svg"} <= names
+        assert _non_empty(tmp_path / "report" / f"{stem}.png")
+        assert _non_empty(tmp_path / "report" / f"{stem}.svg")
+    # No checkpoints in synthetic runs: Figure 4 is left out with a note, not an error.
+    assert any("Figure 4: no finished run" in note for note in report.notes)
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "s3rl_torchrl.report.cli", *args],
+        capture_output=True, text=True, timeout=300,
+    )
+
+
+def test_cli_errors_and_success(tmp_path, make_run, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main([str(empty)]) == 2
+    assert "No runs found below" in capsys.readouterr().err
+
+    make_run(tmp_path / "mixed" / "a", seed=1)
+    make_run(tmp_path / "mixed" / "b", seed=2, collector__total_frames=800)
+    assert main([str(tmp_path / "mixed")]) == 2
+    assert "collector.total_frames: 600" in capsys.readouterr().err
+
+    # The module as a program (what the s3rl-report console script runs).
+
+    out = _cli(str(tmp_path / "mixed"), "--group-by", "collector.total_frames",
+               "--out", str(tmp_path / "rep"), "--no-embeddings")
+    assert out.returncode == 0, out.stderr
+    assert _non_empty(tmp_path / "rep" / "report.md")
+    assert "s3rl (collector.total_frames=800)" in (tmp_path / "rep" / "report.md").read_text()
+
+
+@pytest.fixture(scope="module")
+def tiny_runs(tmp_path_factory):
+    """S3RL and SAC-Lag, one tiny run each on Swimmer-v1 (it has unsafe states within 600
+    frames, HalfCheetah has none)."""
+    root = tmp_path_factory.mktemp("tiny")
+    register_configs()
+    for algo in ("s3rl", "sac_lag"):
+        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+            cfg = compose(config_name="train", overrides=[
+                "experiment=tiny", f"algo={algo}", "task=SafetySwimmerVelocity-v1", "seed=3",
+            ])
+        train(validate(cfg), root / algo)
+    return root
+
+
+def test_training_logs_the_probe_every_epoch(tiny_runs):
+    run = read_run(tiny_runs / "s3rl")
+    frames, accuracy = run.column("probe/accuracy")
+    _, auc = run.column("probe/auc")
+    assert frames == [200, 400, 600]
+    assert all(0.0 <= a <= 1.0 for a in accuracy) and all(0.0 <= u <= 1.0 for u in auc)
+    assert not math.isnan(accuracy[-1])
+
+
+def test_the_probe_does_not_change_training(tiny_runs, tmp_path, monkeypatch):
+    """The probe draws from its own generator: a run without it trains exactly the same."""
+    from s3rl_torchrl.report.probe import ProbeResult
+    from s3rl_torchrl.trainer import loop
+
+    nan = float("nan")
+    monkeypatch.setattr(loop, "replay_probe", lambda *a, **k: ProbeResult(nan, nan, nan, 0, 0, 0, 0))
+    register_configs()
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="train", overrides=[
+            "experiment=tiny", "algo=s3rl", "task=SafetySwimmerVelocity-v1", "seed=3",
+        ])
+    train(validate(cfg), tmp_path / "no_probe")
+    with_probe = read_run(tiny_runs / "s3rl").metrics
+    without = read_run(tmp_path / "no_probe").metrics
+    skip = {"eval/seconds", "probe/accuracy", "probe/auc"}
+    for a, b in zip(with_probe, without, strict=True):
+        same = {k: a[k] for k in a if k not in skip}
+        assert same == pytest.approx({k: b[k] for k in same}, nan_ok=True, rel=0, abs=0)
+
+
+def test_report_with_checkpoint_rollouts(tiny_runs, tmp_path):
+    report = build_report(tiny_runs, tmp_path / "report", embedding_episodes=2, tsne_states=100)
+    text = report.path.read_text()
+    assert _non_empty(tmp_path / "report" / "figure4_embedding_tsne.png")
+    assert _non_empty(tmp_path / "report" / "figure4_embedding_tsne.svg")
+    # one probe row per algo: 2 rollouts x eval.max_steps (50) states
+    rows = [line for line in text.splitlines() if line.startswith("| SafetySwimmerVelocity-v1 |")
+            and "| 3 |" in line]
+    assert len(rows) == 2
+    for row in rows:
+        safe, unsafe = (int(x) for x in row.split("|")[4].split("/"))
+        assert safe + unsafe == 100
