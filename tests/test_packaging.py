@@ -33,7 +33,7 @@ def test_every_subpackage_is_in_the_package_list():
     assert listed - found == {"s3rl_torchrl.configs"}  # configs/, mapped in package-dir
     assert PYPROJECT["tool"]["setuptools"]["package-dir"] == {"s3rl_torchrl.configs": "configs"}
     scripts = PYPROJECT["project"]["scripts"]
-    assert all(target.startswith("s3rl_torchrl.recipes.") for target in scripts.values())
+    assert all(target.startswith("s3rl_torchrl.") for target in scripts.values())
 
 
 def test_a_checkout_reads_the_top_level_configs():
