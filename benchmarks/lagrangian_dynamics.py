@@ -51,7 +51,10 @@ from _report import write_report  # noqa: E402
 SETTINGS: dict[str, list[str]] = {
     "fsrl": ["pid=fsrl"],  # the paper's PID in FSRL's form, one update per 20-episode collect
     "pid_ema": ["pid=ema"],  # the same gains, OmniSafe's EMA of error and cost, delay 10
-    "fsrl_5k": ["pid=fsrl", "collector.frames_per_batch=5000"],  # 4 updates per 20000 frames
+    # Twice as many updates (10 episodes each, 2000 gradient steps between them): the schedule
+    # of issue 15's run. With 10 envs in lockstep on 1000-step episodes a smaller batch does not
+    # update more often: episodes only end every 10000 frames.
+    "fsrl_10k": ["pid=fsrl", "collector.frames_per_batch=10000"],
     "learned": ["algo.lagrangian=learned"],  # Adam on lambda (J - d), OmniSafe's SACLag
 }
 BASE_OVERRIDES = ["algo=sac_lag", "threads=1", "logger.progress_bar=false"]
