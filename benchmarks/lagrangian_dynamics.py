@@ -37,6 +37,7 @@ import os
 import shutil
 import subprocess
 import sys
+import textwrap
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -225,7 +226,8 @@ def plot(runs: list[dict], path: Path) -> None:
         rows = read_rows(Path(run["run_dir"]) / "metrics.csv")
         frames = [_float(r["frames"]) / 1e3 for r in rows]
         axes[0, j].plot(frames, [_float(r["lagrangian"]) for r in rows], "k.-")
-        axes[0, j].set_title(f"{run['task'].replace('Safety', '')}\n{run['setting']}", fontsize=7)
+        title = f"{run['task'].replace('Safety', '')} seed {run['seed']}\n{run['setting']}"
+        axes[0, j].set_title(textwrap.fill(title.replace(",", ", "), 48), fontsize=7)
         axes[0, j].set_ylabel("lambda after the update")
         axes[1, j].plot(frames, [_float(r["eval/cost"]) for r in rows], "r.-", label="eval")
         axes[1, j].plot(frames, [_float(r["train/cost"]) for r in rows], "b.-", label="train")
