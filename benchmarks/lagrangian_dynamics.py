@@ -24,7 +24,7 @@ log (``logger=csv``, the default), between consecutive lambda updates; the mean 
 training reward and cost; the final evaluation if there is one. Runs are grouped by task and
 controller setting (read from each run's ``config.json``) and the means and standard deviations
 over seeds written to ``--out``. ``--csv-dir`` copies each run's ``metrics.csv`` (a few kB)
-there as ``<task>/<setting>/seed<seed>.csv``.
+there as ``<task>/<setting>/seed<seed>.csv`` (the setting's name with ``_`` for punctuation).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import csv
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -208,7 +209,7 @@ def markdown(table: list[dict]) -> str:
 
 def copy_metrics(runs: list[dict], csv_dir: Path) -> None:
     for run in runs:
-        slug = run["setting"].replace(" ", "_").replace(",", "_").replace("=", "")
+        slug = re.sub(r"[^A-Za-z0-9.]+", "_", run["setting"]).strip("_")
         target = csv_dir / run["task"] / slug / f"seed{run['seed']}.csv"
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(Path(run["run_dir"]) / "metrics.csv", target)
@@ -233,6 +234,7 @@ def plot(runs: list[dict], path: Path) -> None:
         axes[1, j].plot(frames, [_float(r["train/cost"]) for r in rows], "b.-", label="train")
         axes[1, j].axhline(run["cost_limit"], color="gray", ls="--", label="limit")
         axes[1, j].set_yscale("symlog", linthresh=10)
+        axes[1, j].set_ylim(bottom=0)
         axes[1, j].set_xlabel("frames (k)")
         axes[1, j].set_ylabel("episode cost")
         axes[1, j].legend(fontsize=6)
