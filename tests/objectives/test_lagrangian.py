@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -153,3 +154,98 @@ def test_learned_lagrangian_bad_arguments():
         LearnedLagrangian(cost_limit=1.0, lagrangian_init=-1.0)
     with pytest.raises(ValueError, match="cost_limit"):
         LearnedLagrangian(cost_limit=-2.0)
+
+
+# ------------------------------------------------------------------ controllers in a closed loop
+# A synthetic plant for the policy: the cost of the next collect falls linearly with the
+# multiplier in force while the policy trains, J_{t+1} = max(0, J0 - k lambda_t) (+ noise).
+# J0 = 900 and k = 486 fit the SAC-Lag run of issue 15 on HalfCheetah (J ~ 900 at lambda ~ 0,
+# ~ 270 at lambda 1.3): the cost that meets the limit d = 10 needs lambda* = 890 / 486 = 1.83.
+PLANT = {"J0": 900.0, "k": 486.0}
+LIMIT = 10.0
+# configs/pid/ema.yaml: the paper's gains with OmniSafe's damping options.
+DAMPED = {"error_ema": 0.95, "cost_ema": 0.95, "derivative_delay": 10}
+
+
+def closed_loop(controller, updates, J0, k, noise=0.0, seed=0):
+    """Costs fed to the controller and the multipliers it returned, one entry per update."""
+    rng = np.random.default_rng(seed)
+    lam, costs, lams = float(controller.lagrangian[0]), [], []
+    for _ in range(updates):
+        cost = max(0.0, J0 - k * lam + noise * rng.standard_normal())
+        lam = float(controller.update(cost)[0])
+        costs.append(cost)
+        lams.append(lam)
+    return np.array(costs), np.array(lams)
+
+
+def test_fsrl_pid_on_a_steep_plant_is_a_period_two_cycle():
+    kp, ki, kd = 0.05, 0.0005, 0.1
+    costs, lams = closed_loop(PIDLagrangian(kp, ki, kd, LIMIT), 400, **PLANT)
+    # By hand: J=900: e=890, I=890, D=890 -> 44.5 + 0.445 + 89 = 133.945 -> next J = 0
+    #          J=0:   e=-10, I=880, D=0   -> -0.5 + 0.44 < 0 -> 0          -> next J = 900
+    #          J=900: e=890, I=1770, D=900 -> 44.5 + 0.885 + 90 = 135.385
+    #          J=0:   e=-10, I=1760        -> -0.5 + 0.88 = 0.38           -> next J = 715.32
+    assert lams[:4] == pytest.approx([133.945, 0.0, 135.385, 0.38], abs=1e-9)
+    assert costs[4] == pytest.approx(900 - 486 * 0.38)
+    # Over the limit and at zero in turn, for all 400 updates: the high lambda of one update
+    # (kp + kd = 0.15 per unit of excess cost) stops the plant, the next has only the integral.
+    assert (costs[1::2] == 0).all() and (costs[0::2] > LIMIT).all()
+    # After a J = 0 collect, e = -d and D = 0: lambda = ki * sum(e) - kp * d (the running sum of
+    # errors stays positive, so the integral never clamps).
+    integral = np.cumsum(costs - LIMIT)
+    assert (integral > 0).all()
+    low = np.maximum(0.0, ki * integral - kp * LIMIT)[1::2]
+    assert lams[1::2] == pytest.approx(low, abs=1e-9)
+    # The cycle the formula settles in: the integral stops moving when the errors cancel over a
+    # period, e_high = -e_low = d, i.e. J alternates 2d and 0 (mean J = d, never within the
+    # limit twice in a row); lambda jumps by 2d (kp + kd) + d ki = 3.005 at every update.
+    assert costs[-20::2] == pytest.approx(np.full(10, 2 * LIMIT), abs=1e-3)
+    jumps = np.abs(np.diff(lams[-20:]))
+    assert jumps == pytest.approx(np.full(19, 2 * LIMIT * (kp + kd) + LIMIT * ki), abs=1e-3)
+
+
+def test_damped_pid_on_the_same_plant_settles_without_cycling():
+    costs, lams = closed_loop(PIDLagrangian(0.05, 0.0005, 0.1, LIMIT, **DAMPED), 400, **PLANT)
+    # First update: P = 0.05 * 890, C = 0.95 d + 0.05 * 900 = 54.5 against d 10 updates back:
+    # 0.05 * 44.5 + 0.0005 * 890 + 0.1 * 44.5 = 7.12 (vs 133.9 undamped).
+    assert lams[0] == pytest.approx(0.05 * 44.5 + 0.0005 * 890 + 0.1 * 44.5, abs=1e-9)
+    # The EMAs hold lambda up while the delayed derivative window passes (10 updates at J = 0),
+    # then it is at the plant's lambda* and moves less every update: no cycle.
+    assert (costs[1:11] == 0).all()
+    jumps = np.abs(np.diff(lams[40:]))
+    assert jumps.max() < 0.001 and (np.diff(jumps[::10]) <= 0).all()
+    # From above, monotonically: the integral alone closes the offset the P term leaves
+    # (slowly: ~1 % of it per update), reaching the limit within 10 % in 400 updates.
+    assert (np.diff(costs[40:]) <= 1e-9).all()
+    assert LIMIT <= costs[-1] <= 1.1 * LIMIT
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_damping_removes_the_cycle_on_a_noisy_plant(seed):
+    """Same plant, 20 cost units of noise per collect, 100 updates (the paper's 1M frames at
+    10000 per collect); second half: the damped lambda moves 10x less and its mean is within
+    10 % of lambda*, FSRL's keeps swinging by the noise times (kp + kd) k."""
+    lam_star = (PLANT["J0"] - LIMIT) / PLANT["k"]
+    fsrl = closed_loop(PIDLagrangian(cost_limit=LIMIT), 100, **PLANT, noise=20.0, seed=seed)
+    damped = closed_loop(
+        PIDLagrangian(cost_limit=LIMIT, **DAMPED), 100, **PLANT, noise=20.0, seed=seed
+    )
+    swing_fsrl = np.abs(np.diff(fsrl[1][50:])).mean()
+    swing_damped = np.abs(np.diff(damped[1][50:])).mean()
+    assert swing_fsrl > 1.0 and swing_damped < 0.1 * swing_fsrl
+    assert damped[1][50:].mean() == pytest.approx(lam_star, rel=0.1)
+
+
+def test_learned_lagrangian_on_the_plant_climbs_by_lr_and_settles():
+    lr = 0.05
+    costs, lams = closed_loop(LearnedLagrangian(LIMIT, lr=lr, lagrangian_init=0.0), 200, **PLANT)
+    # While the constraint is violated the gradient -(J - d) keeps its sign and Adam steps by
+    # m_hat / sqrt(v_hat) * lr: lr while |J - d| barely shrinks, less as it does.
+    steps = np.diff(np.concatenate([[0.0], lams]))
+    assert steps[:10] == pytest.approx(np.full(10, lr), rel=0.05)
+    assert (costs[:50] > LIMIT).all() and (steps[:50] > 0).all()
+    # It settles at lambda* with steps of at most lr: no cycle of the PID's size.
+    lam_star = (PLANT["J0"] - LIMIT) / PLANT["k"]
+    assert np.abs(steps).max() <= lr * 1.001
+    assert lams[-50:].mean() == pytest.approx(lam_star, rel=0.05)

@@ -35,9 +35,10 @@ def test_every_registered_task_is_a_config_option(task, compose):
 def test_paper_experiment_matches_table_3(compose):
     cfg = validate(compose("experiment=paper"))
     c, a = cfg.collector, cfg.algo
-    assert (c.total_frames, c.frames_per_epoch, c.num_envs, cfg.eval.num_envs) == (
-        1_000_000, 10_000, 10, 2,
-    )
+    assert (c.total_frames, c.num_envs, cfg.eval.num_envs) == (1_000_000, 10, 2)
+    # FSRL's collect of episode_per_collect = 20 episodes of 1000 steps over the 10 envs: one
+    # lambda update and 0.2 x 20000 gradient steps per collect, one collect per epoch.
+    assert (c.frames_per_batch, c.frames_per_epoch) == (20 * 1000, 20 * 1000)
     assert (a.batch_size, a.update_per_step, a.buffer_size, a.n_step) == (256, 0.2, 100_000, 2)
     assert (a.actor_lr, a.critic_lr, a.alpha_lr, a.alpha_init, a.tau, a.gamma) == (
         5e-4, 1e-3, 3e-4, 0.005, 0.05, 0.99,
@@ -47,6 +48,37 @@ def test_paper_experiment_matches_table_3(compose):
     assert a.contrastive_cfg.temperature == 0.7 and a.rescaling
     assert cfg.network.actor_hidden == [128, 128] and cfg.save_interval == 4
     assert cfg.task.cost_limit == 10.0
+
+
+def test_pid_options_fsrl_by_default_and_the_damped_ema(compose):
+    from s3rl_torchrl.objectives import PIDLagrangian
+    from s3rl_torchrl.trainer.builders import build_lagrangian
+
+    for overrides in [(), ("pid=fsrl",), ("experiment=paper", "algo=sac_lag")]:
+        pid = validate(compose(*overrides)).algo.pid
+        assert (pid.kp, pid.ki, pid.kd, pid.ema_alpha, pid.derivative_delay) == (
+            0.05, 0.0005, 0.1, 0.0, 1,
+        )
+        assert pid.penalty_max is None and not pid.ki_inside_integral
+    cfg = validate(compose("algo=sac_lag", "pid=ema", "experiment=paper"))
+    pid = cfg.algo.pid
+    # The paper's gains; OmniSafe's pid_delta_p/d_ema_alpha 0.95 and pid_d_delay 10.
+    assert (pid.kp, pid.ki, pid.kd, pid.ema_alpha, pid.derivative_delay) == (
+        0.05, 0.0005, 0.1, 0.95, 10,
+    )
+    controller = build_lagrangian(cfg.algo, cfg.task.cost_limit)
+    assert isinstance(controller, PIDLagrangian)
+    assert (controller.error_ema, controller.cost_ema, controller.derivative_delay) == (
+        0.95, 0.95, 10,
+    )
+    # First update from J = 900, d = 10: 0.05 (0.05 * 890) + 0.0005 * 890 + 0.1 * (0.95 * 10
+    # + 0.05 * 900 - 10) = 7.12 (FSRL's form: 133.945).
+    assert controller.update(900.0).item() == pytest.approx(7.12, abs=1e-9)
+    # The command line still wins over the option.
+    assert validate(compose("pid=ema", "algo.pid.ema_alpha=0.8")).algo.pid.ema_alpha == 0.8
+    with pytest.raises(ConfigCompositionException) as err:
+        compose("pid=omnisafe")
+    assert "ema" in str(err.value) and "fsrl" in str(err.value)
 
 
 @pytest.mark.parametrize(

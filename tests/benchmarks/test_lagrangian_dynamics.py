@@ -1,0 +1,126 @@
+"""benchmarks/lagrangian_dynamics.py: second-half statistics against a hand-made run, and a
+launch of two tiny runs end to end."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import lagrangian_dynamics as ld  # noqa: E402
+
+COLUMNS = ["frames", "epoch", "train/reward", "train/cost", "lagrangian"]
+COLUMNS += ["eval/reward", "eval/cost"]
+
+
+def fake_run(root: Path, seed: int, rows: list[list[float]], updates, final=None) -> Path:
+    run = root / f"seed{seed}"
+    (run / "logs" / "exp" / "scalars" / "lagrangian").mkdir(parents=True)
+    config = {
+        "task": {"name": "SafetyHalfCheetahVelocity-v1", "cost_limit": 10.0},
+        "algo": {
+            "lagrangian": "pid",
+            "lagrangian_lr": 0.005,
+            "pid": {
+                "kp": 0.05,
+                "ki": 0.0005,
+                "kd": 0.1,
+                "ema_alpha": 0.0,
+                "derivative_delay": 1,
+                "penalty_max": None,
+            },
+        },
+        "collector": {"frames_per_batch": 20000},
+        "seed": seed,
+    }
+    (run / "config.json").write_text(json.dumps(config))
+    with (run / "metrics.csv").open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(COLUMNS)
+        writer.writerows(rows)
+    with (run / "logs" / "exp" / "scalars" / "lagrangian" / "value.csv").open("w") as f:
+        f.writelines(f"{frames},{lam}\n" for frames, lam in updates)
+    if final is not None:
+        (run / "final_eval.json").write_text(
+            json.dumps({"reward_mean": final[0], "cost_mean": final[1]})
+        )
+    return run
+
+
+def test_second_half_statistics_by_hand(tmp_path):
+    nan = float("nan")
+    # frames, epoch, train reward, train cost, lambda, eval reward, eval cost
+    rows = [
+        [20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0],
+        [40000, 2, 0.0, 650.0, 90.0, 100.0, 0.0],
+        [60000, 3, 0.0, nan, 1.0, 100.0, 800.0],
+        [80000, 4, 2000.0, 20.0, 100.0, 3000.0, 900.0],  # second half: frames > 60000
+        [100000, 5, 500.0, 15.0, 0.5, -100.0, 0.0],
+        [120000, 6, 800.0, 0.0, 2.0, 1000.0, 5.0],
+    ]
+    updates = [(20000, 0), (40000, 90), (60000, 1), (80000, 100), (90000, 50), (100000, 0.5)]
+    updates.append((120000, 2))
+    a = fake_run(tmp_path, 10, rows, updates, final=(2500.0, 3.0))
+    s = ld.summarise_run(a)
+    assert s["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) batch=20000"
+    assert (s["frames"], s["epochs_second_half"], s["seed"]) == (120000, 3, 10)
+    assert s["eval_cost_over_limit"] == pytest.approx(1 / 3)  # 900 | 0, 5
+    assert s["train_cost_over_limit"] == pytest.approx(2 / 3)  # 20, 15 | 0
+    assert s["mean_abs_dlambda_epoch"] == pytest.approx((99.5 + 1.5) / 2)
+    assert s["mean_abs_dlambda_update"] == pytest.approx((50 + 49.5 + 1.5) / 3)
+    assert s["lambda_mean"] == pytest.approx(102.5 / 3)
+    assert s["eval_reward"] == pytest.approx(1300.0)
+    assert s["eval_cost"] == pytest.approx(905 / 3)
+    assert s["train_cost"] == pytest.approx(35 / 3)
+    assert (s["final_reward"], s["final_cost"]) == (2500.0, 3.0)
+
+    # A second seed of the same setting: every late eval cost over the limit, no final eval.
+    rows_b = [[r[0], r[1], r[2], r[3], r[4] * 2, r[5], 50.0] for r in rows]
+    b = fake_run(tmp_path, 20, rows_b, updates)
+    report = ld.summarise([a, b, tmp_path / "not_a_run"], tmp_path / "s.json", None, None)
+    (row,) = report["settings"]
+    assert row["seeds"] == [10, 20]
+    assert row["eval_cost_over_limit"] == pytest.approx((1 / 3 + 1) / 2)
+    assert row["eval_cost_over_limit_std"] == pytest.approx(math.sqrt(2 * (1 / 3) ** 2))
+    assert row["mean_abs_dlambda_epoch"] == pytest.approx((50.5 + 101) / 2)
+    assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
+    saved = json.loads((tmp_path / "s.json").read_text())
+    assert saved["settings"][0]["seeds"] == [10, 20] and len(saved["runs"]) == 2
+
+
+def test_launch_two_settings_of_tiny_runs_then_skip_them(tmp_path, capsys):
+    args = ["launch", "--experiment", "tiny", "--settings", "fsrl", "pid_ema", "--seeds", "1"]
+    args += ["--frames", "400", "--no-compile", "--jobs", "2", "--runs-dir", str(tmp_path / "runs")]
+    report = ld.main([*args, "--csv-dir", str(tmp_path / "csv")])
+    fsrl, ema = sorted(report["settings"], key=lambda r: "ema" in r["setting"])
+    assert fsrl["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) batch=100"
+    assert ema["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
+    for row in (fsrl, ema):
+        assert row["frames"] == 400 and row["seeds"] == [1]
+        assert not math.isnan(row["eval_reward"]) and not math.isnan(row["final_reward"])
+    copies = sorted(p.relative_to(tmp_path / "csv") for p in (tmp_path / "csv").rglob("*.csv"))
+    assert len(copies) == 2 and all(p.name == "seed1.csv" for p in copies)
+    run_dir = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "pid_ema" / "seed1"
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["algo"]["pid"]["ema_alpha"] == 0.95 and config["algo"]["name"] == "sac_lag"
+    capsys.readouterr()
+    ld.main(args)  # both finished: nothing is launched again
+    assert "launch:" not in capsys.readouterr().out
+
+
+def test_plant_mode_builds_the_configured_controllers(tmp_path):
+    report = ld.main(["plant", "--noise", "0", "--seeds", "0", "--updates", "4"])
+    rows = {r["setting"]: r for r in report["settings"]}
+    # By hand (tests/objectives/test_lagrangian.py): FSRL's form from J = 900, 0, 900, 0 ...
+    assert rows["fsrl"]["first_lambdas_seed0"] == [133.945, 0.0, 135.385, 0.38]
+    # ... pid=ema's first update 0.05 * 44.5 + 0.0005 * 890 + 0.1 * 44.5; Adam's first steps = lr
+    assert rows["pid_ema"]["first_lambdas_seed0"][0] == pytest.approx(7.12)
+    assert rows["learned"]["first_lambdas_seed0"][:2] == pytest.approx([0.005, 0.01], abs=1e-6)
+    assert rows["learned_lr0.05"]["first_lambdas_seed0"][0] == pytest.approx(0.05, abs=1e-6)
+    # Second half (updates 3, 4): J = 900 then 0 for FSRL, over the limit once in two.
+    assert rows["fsrl"]["cost_over_limit"] == 0.5
