@@ -134,3 +134,18 @@ def test_resume_needs_the_groups_seeds(tiny_config, tmp_path):
 def test_bad_seeds_fail_before_training(overrides, match, tiny_config):
     with pytest.raises(ConfigError, match=match):
         tiny_config(*overrides)
+
+
+def test_cli_trains_a_group(tmp_path):
+    from tests.trainer.test_cli import TINY, run
+
+    run_dir = tmp_path / "group"
+    out = run("s3rl-train", *TINY, "algo=sac", "seeds=[11,12]", f"hydra.run.dir={run_dir}",
+              cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    for seed in SEEDS:
+        assert f"sac SafetyHalfCheetahVelocity-v1 seed {seed}" in out.stdout
+        assert (run_dir / f"seed{seed}" / "final_eval.json").is_file()
+    out = run("s3rl-train", *TINY, "algo=sac", "seeds=[11,11]", f"hydra.run.dir={run_dir}",
+              cwd=tmp_path)
+    assert out.returncode == 2 and "distinct" in out.stderr
