@@ -4,7 +4,7 @@
     s3rl-train algo=sac_lag task=SafetyHopperVelocity-v1 seed=20 collector.total_frames=20000
     s3rl-train -m seed=10,20 algo=s3rl,sac_lag  # a sweep
     s3rl-train resume=outputs/s3rl/.../<run>    # continue an interrupted run
-    s3rl-train seeds=[10,20,30,40,50]           # five seeds in one process, one batched update
+    s3rl-train 'seeds=[10,20,30,40,50]'         # five seeds in one process, one batched update
 
 The loop lives in :mod:`s3rl_torchrl.trainer`; this file only parses and validates the config.
 """

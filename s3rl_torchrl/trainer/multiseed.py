@@ -240,7 +240,7 @@ class MultiSeedTrainer:
                 member.save()
         progress.write(
             f"Interrupted: checkpoints written to {self.run_dir}/seed*/checkpoints/latest; "
-            f"continue with resume={self.run_dir} seeds=[{','.join(map(str, self.cfg.seeds))}]"
+            f"continue with resume={self.run_dir} 'seeds=[{','.join(map(str, self.cfg.seeds))}]'"
         )
         runs = [
             TrainResult(m.run_dir, "interrupted", m.counters, None, m.history)
