@@ -1,7 +1,7 @@
 """Several seeds in one process: env steps/s summed over seeds, K = 1, 2, 5 (10), paper settings.
 
     python benchmarks/multiseed_throughput.py [--frames 10000] [--ks 1 2 5] [--modes eager compiled]
-        [--threads 1] [--task SafetyHalfCheetahVelocity-v1]
+        [--threads 1] [--task SafetyHalfCheetahVelocity-v1] [--frames-per-batch 10000]
         [--out benchmarks/results/multiseed_throughput.json]
     python benchmarks/multiseed_throughput.py --step-only [--ks 1 2 5 10] [--modes eager compiled]
 
@@ -10,6 +10,8 @@ the multi-seed recipe (``MultiSeedTrainer``, ``seeds=[...]``) with K seeds, each
 process (its peak RSS is the memory reported), at ``experiment=paper`` settings. As in
 ``train_throughput.py`` the clock runs over ``--frames`` frames per seed *after* the 10 000
 warm-up frames, evaluation time subtracted; env steps/s are summed over the seeds.
+``--frames-per-batch`` (paper: 10 000, also the epoch) shortens the measured stretch on a busy
+machine; the update ratio (0.2 gradient steps per frame) and everything else stay the paper's.
 
 ``--step-only``: the gradient step alone (one batch of 256 per seed, 128x128 networks), the
 single-seed joint step against ``StackedSACLag.update`` for each K, timed in interleaved rounds
@@ -36,13 +38,18 @@ CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
 WARMUP = 10_000
 
 
-def paper_config(task: str, frames: int, compiled: bool, threads: int, seeds: list[int] | None):
+def paper_config(
+    task: str, frames: int, compiled: bool, threads: int, seeds: list[int] | None, batch: int
+):
     register_configs()
     overrides = [
         "experiment=paper",
+        f"collector.frames_per_batch={batch}",
+        f"collector.frames_per_epoch={batch}",
         f"task={task}",
         f"collector.total_frames={WARMUP + frames}",
         "eval.episodes=1",
+        "eval.max_steps=100",  # evaluation is not what is measured: keep it short
         "eval.random_baseline=false",
         "logger=none",
         "logger.progress_bar=false",
@@ -58,14 +65,18 @@ def paper_config(task: str, frames: int, compiled: bool, threads: int, seeds: li
     return cfg
 
 
-def measure_recipe(task: str, frames: int, compiled: bool, threads: int, k: int | None) -> dict:
+def measure_recipe(
+    task: str, frames: int, compiled: bool, threads: int, k: int | None, batch: int
+) -> dict:
     """One run; ``k=None``: the single-seed recipe, else ``MultiSeedTrainer`` with k seeds."""
     seeds = None if k is None else [10 * (i + 1) for i in range(k)]
-    cfg = paper_config(task, frames, compiled, threads, seeds)
+    cfg = paper_config(task, frames, compiled, threads, seeds, batch)
     marks: dict[int, list[tuple[float, float]]] = {}  # frames -> [(time, eval seconds)]
 
     def on_epoch_end(trainer, row):
-        marks.setdefault(row["frames"], []).append((time.perf_counter(), row["eval/seconds"]))
+        marks.setdefault(row["frames"], []).append(
+            (time.perf_counter(), time.process_time(), row["eval/seconds"])
+        )
 
     with tempfile.TemporaryDirectory() as run_dir:
         start = time.perf_counter()
@@ -77,13 +88,17 @@ def measure_recipe(task: str, frames: int, compiled: bool, threads: int, k: int 
             group = MultiSeedTrainer(cfg, run_dir, on_epoch_end=on_epoch_end)
             group.run()
             grad_steps = group.members[0].counters.grad_steps
-    epochs = sorted(marks)
-    # From the end of the warm-up epoch (every seed evaluated) to the end of the last one.
-    t0, t1 = marks[epochs[0]][-1][0], marks[epochs[-1]][-1][0]
-    eval_seconds = sum(e for f in epochs[1:] for _, e in marks[f])
+    # From the end of the epoch that closes the warm-up (every seed evaluated; it holds the
+    # first batch's gradient steps) to the end of the last one.
+    last = max(marks)
+    (t0, cpu0, _), (t1, cpu1, _) = marks[WARMUP][-1], marks[last][-1]
+    eval_seconds = sum(e for f in marks if f > WARMUP for _, _, e in marks[f])
     seconds = t1 - t0 - eval_seconds
+    # Process CPU time (one torch thread) is what the work costs; wall time also counts the
+    # time other processes held the cores. Evaluation (100 steps) is left in: it is small.
+    cpu_seconds = cpu1 - cpu0
     seeds_count = 1 if k is None else k
-    frames_measured = (epochs[-1] - epochs[0]) * seeds_count
+    frames_measured = (last - WARMUP) * seeds_count
     return {
         "recipe": "single-seed Trainer" if k is None else "MultiSeedTrainer",
         "mode": "compiled" if compiled else "eager",
@@ -91,10 +106,13 @@ def measure_recipe(task: str, frames: int, compiled: bool, threads: int, k: int 
         "frames_measured_all_seeds": frames_measured,
         "seconds": round(seconds, 2),
         "env_steps_per_s_all_seeds": round(frames_measured / seconds, 1),
+        "cpu_seconds": round(cpu_seconds, 2),
+        "env_steps_per_cpu_s_all_seeds": round(frames_measured / cpu_seconds, 1),
         "gradient_steps_per_seed": grad_steps,
         "warmup_seconds_incl_first_compile": round(t0 - start, 2),
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "threads": threads,
+        "frames_per_batch": batch,
     }
 
 
@@ -107,7 +125,7 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     from s3rl_torchrl.trainer.loop import compile_loss, seed_everything
 
     torch.set_num_threads(threads)
-    cfg = paper_config(task, 0, compiled, threads, None)
+    cfg = paper_config(task, 0, compiled, threads, None, 10_000)
     agents = []
     for k in range(max(ks)):
         seed_everything(k)
@@ -148,21 +166,28 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
         batches = torch.stack([batch] * k)
         noise = torch.stack([draw_noise(cfg.algo.batch_size, action_dim) for _ in range(k)])
         cases[f"StackedSACLag K={k}"] = lambda g=group, b=batches, n=noise: g.update(b, n)
-    times = interleaved_rounds(cases, calls=50, rounds=7, warmup=5)
+    wall = interleaved_rounds(cases, calls=20, rounds=7, warmup=5)
+    # The same, in process CPU time: what the step costs, whatever else holds the cores.
+    cpu = interleaved_rounds(cases, calls=20, rounds=7, warmup=0, clock=time.process_time)
     rows = []
-    base = sorted(times["single-seed step"])[len(times["single-seed step"]) // 2]
-    for name, values in times.items():
-        median = sorted(values)[len(values) // 2]
+
+    def median(values):
+        return sorted(values)[len(values) // 2]
+
+    base_wall, base_cpu = median(wall["single-seed step"]), median(cpu["single-seed step"])
+    for name in cases:
         seeds = 1 if name.startswith("single") else int(name.split("=")[1])
         rows.append(
             {
                 "case": name,
                 "mode": "compiled" if compiled else "eager",
                 "seeds": seeds,
-                "median_ms_per_step": round(median / 1e3, 3),
-                "min_ms_per_step": round(min(values) / 1e3, 3),
-                "wall_vs_single_seed_step": round(median / base, 2),
-                "seed_steps_per_s_vs_single": round(seeds * base / median, 2),
+                "median_wall_ms_per_step": round(median(wall[name]) / 1e3, 3),
+                "min_wall_ms_per_step": round(min(wall[name]) / 1e3, 3),
+                "median_cpu_ms_per_step": round(median(cpu[name]) / 1e3, 3),
+                "cpu_vs_single_seed_step": round(median(cpu[name]) / base_cpu, 2),
+                "seed_steps_per_cpu_s_vs_single": round(seeds * base_cpu / median(cpu[name]), 2),
+                "wall_vs_single_seed_step": round(median(wall[name]) / base_wall, 2),
                 "threads": threads,
             }
         )
@@ -176,15 +201,16 @@ def main() -> None:
     parser.add_argument("--modes", nargs="*", default=["eager", "compiled"])
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
+    parser.add_argument("--frames-per-batch", type=int, default=10_000)
     parser.add_argument("--step-only", action="store_true")
     parser.add_argument("--one", nargs=2, metavar=("MODE", "K"), help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     if args.one is not None:  # a child process: one run, its row on stdout
         mode, k = args.one
-        row = measure_recipe(
-            args.task, args.frames, mode == "compiled", args.threads, None if k == "single" else int(k)
-        )
+        k = None if k == "single" else int(k)
+        compiled = mode == "compiled"
+        row = measure_recipe(args.task, args.frames, compiled, args.threads, k, args.frames_per_batch)
         print("ROW " + json.dumps(row), flush=True)
         return
     rows = []
@@ -199,7 +225,8 @@ def main() -> None:
     for mode in args.modes:
         for k in ["single", *map(str, args.ks)]:
             cmd = [sys.executable, __file__, "--one", mode, k, "--frames", str(args.frames),
-                   "--threads", str(args.threads), "--task", args.task]
+                   "--threads", str(args.threads), "--task", args.task,
+                   "--frames-per-batch", str(args.frames_per_batch)]
             out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
             row = json.loads(next(line for line in out.splitlines() if line.startswith("ROW "))[4:])
             print(json.dumps(row), flush=True)
