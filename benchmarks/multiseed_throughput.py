@@ -14,8 +14,10 @@ warm-up frames, evaluation time subtracted; env steps/s are summed over the seed
 machine; the update ratio (0.2 gradient steps per frame) and everything else stay the paper's.
 
 ``--step-only``: the gradient step alone (one batch of 256 per seed, 128x128 networks), the
-single-seed joint step against ``StackedSACLag.update`` for each K, timed in interleaved rounds
-in one process (other processes' load hits every case alike).
+single-seed joint step against ``StackedSACLag.update`` for each K, and as a lower bound for
+K seeds the single-seed step on K x 256 rows (K seeds' FLOPs, one call's overhead), timed in
+interleaved rounds in one process (other processes' load hits every case alike), in wall and
+in process CPU time.
 """
 
 from __future__ import annotations
@@ -84,10 +86,15 @@ def measure_recipe(
             trainer = Trainer(cfg, run_dir, on_epoch_end=on_epoch_end)
             trainer.run()
             grad_steps = trainer.counters.grad_steps
+            buffer = trainer.replay_buffer
         else:
             group = MultiSeedTrainer(cfg, run_dir, on_epoch_end=on_epoch_end)
             group.run()
             grad_steps = group.members[0].counters.grad_steps
+            buffer = group.members[0].replay_buffer
+    # The storage is allocated at full capacity on first write; the RSS only counts the pages
+    # written so far (the frames collected), so the full buffer's size is given apart.
+    buffer_mb = buffer.storage._storage.bytes() / 2**20
     # From the end of the epoch that closes the warm-up (every seed evaluated; it holds the
     # first batch's gradient steps) to the end of the last one.
     last = max(marks)
@@ -111,6 +118,7 @@ def measure_recipe(
         "gradient_steps_per_seed": grad_steps,
         "warmup_seconds_incl_first_compile": round(t0 - start, 2),
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+        "replay_buffer_mb_at_capacity_per_seed": round(buffer_mb, 1),
         "threads": threads,
         "frames_per_batch": batch,
     }
@@ -140,8 +148,8 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     single_forward = compile_loss(single.loss) if compiled else single.loss
     optimizers = [o for o in single.optimizers if o is not None]
 
-    def single_step():
-        losses = single_forward(batch)
+    def single_step(rows=batch):
+        losses = single_forward(rows)
         total = sum(v for k, v in losses.items() if k.startswith("loss_"))
         for optimizer in optimizers:
             optimizer.zero_grad(set_to_none=True)
@@ -151,6 +159,13 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
         single.target_updater.step()
 
     cases = {"single-seed step": single_step}
+    # A lower bound for K agents in one step: ONE agent on K x 256 rows does the FLOPs of K
+    # agents with the per-call overhead of one (how far batching over seeds can go at best).
+    big = env.rollout(max(ks) * cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
+    for k in ks:
+        if k > 1:
+            rows = big[: k * cfg.algo.batch_size]
+            cases[f"single-seed step on {k}x256 rows (bound) K={k}"] = lambda b=rows: single_step(b)
     for k in ks:
         # Fresh copies of the agents' losses: a group turns its losses' tensors into views.
         import copy
@@ -176,7 +191,7 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
 
     base_wall, base_cpu = median(wall["single-seed step"]), median(cpu["single-seed step"])
     for name in cases:
-        seeds = 1 if name.startswith("single") else int(name.split("=")[1])
+        seeds = int(name.split("K=")[1]) if "K=" in name else 1
         rows.append(
             {
                 "case": name,

@@ -76,6 +76,52 @@ def draw_noise(batch_size: int, action_dim: int, dtype=torch.float32) -> Tensor:
     )
 
 
+# The tensors that differ between agents; the rest (discount, target entropy) comes from the
+# configuration and must be equal across agents.
+PER_AGENT = (
+    "actor_network_params",
+    "qvalue_network_params",
+    "target_qvalue_network_params",
+    "cost_qvalue_network_params",
+    "target_cost_qvalue_network_params",
+    "log_alpha",
+    "alpha_init",
+    "lagrangian",
+)
+
+
+class _Current:
+    """The tensors of the agent being computed (batched ones inside ``vmap``)."""
+
+    params: TensorDictBase | None = None
+
+
+def _template_loss(loss: SACLagLoss) -> SACLagLoss:
+    """A copy of ``loss`` that reads its per-agent tensors from ``loss._current.params``.
+
+    Plain attribute reads, nothing swapped into modules: ``TensorDict.to_module`` on a whole
+    loss breaks ``torch.compile``'s graph inside ``vmap`` (then the whole step runs eager).
+    """
+
+    def read(name):
+        return property(lambda self: self._current.params.get(name))
+
+    def detached(name):
+        return property(lambda self: self._current.params.get(name).detach())
+
+    namespace = {name: read(name) for name in PER_AGENT}
+    # SACLoss caches these as attributes; here they are views of this call's tensors.
+    namespace["_cached_detached_qvalue_params"] = detached("qvalue_network_params")
+    namespace["_cached_detached_cost_qvalue_params"] = detached("cost_qvalue_network_params")
+    # Clears the weakrefs of the loss's own parameter containers before returning a compiled
+    # result; here there are none (and it reads `.data` of the actor's, refused under vmap).
+    namespace["_clear_weakrefs"] = lambda self, *tds: None
+    template = copy.deepcopy(loss)
+    template.__class__ = type(f"_Stacked{type(loss).__name__}", (type(loss),), namespace)
+    template.__dict__["_current"] = _Current()
+    return template
+
+
 class StackedSACLag:
     """``K`` ``SACLagLoss`` of one architecture, stacked and updated together.
 
@@ -106,16 +152,22 @@ class StackedSACLag:
             raise ValueError("StackedSACLag needs scalar losses (reduction='mean' or 'sum')")
         self.losses = list(losses)
         self.num_agents = len(losses)
-        # The module the stacked tensors are swapped into during the vmapped call; a copy, so
-        # agent 0's own tensors are never replaced, not even for the duration of a call.
-        self._template = copy.deepcopy(losses[0])
+        # The module that computes every agent's loss, reading the agent's tensors from the
+        # stacks (PER_AGENT); its own copies of the shared ones (discount, target entropy).
+        self._template = _template_loss(losses[0])
         per_agent = [TensorDict.from_module(loss) for loss in losses]
         keys = list(per_agent[0].keys(True, True))
         for k, td in enumerate(per_agent[1:], 1):
             if sorted(map(str, td.keys(True, True))) != sorted(map(str, keys)):
                 raise ValueError(f"loss {k} does not have the parameters of loss 0")
+            for key in keys:
+                name = key[0] if isinstance(key, tuple) else key
+                if name not in PER_AGENT and not torch.equal(td.get(key), per_agent[0].get(key)):
+                    raise ValueError(f"the losses differ in {key}, which StackedSACLag shares")
         stacked = {}
         for key in keys:
+            if (key[0] if isinstance(key, tuple) else key) not in PER_AGENT:
+                continue
             leaves = [td.get(key) for td in per_agent]
             value = torch.stack([leaf.detach() for leaf in leaves])
             if isinstance(leaves[0], torch.nn.Parameter):
@@ -163,15 +215,12 @@ class StackedSACLag:
     # ------------------------------------------------------------------ one agent, vmapped
     def _one_agent(self, params: TensorDictBase, batch: TensorDictBase, noise: Tensor):
         loss = self._template
-        # SACLoss caches a detached view of the critic parameters: a cache filled outside this
-        # call holds the template's own tensors, one filled inside holds this call's.
-        loss.__dict__.pop("_cache", None)
+        loss._current.params = params
         try:
-            with params.to_module(loss), _normal_noise(noise.unbind(0)):
-                out = loss(batch)
+            with _normal_noise(noise.unbind(0)):
+                return loss(batch)
         finally:
-            loss.__dict__.pop("_cache", None)
-        return out
+            loss._current.params = None
 
     def loss(self, batches: TensorDictBase, noise: Tensor) -> TensorDictBase:
         """Every agent's ``SACLagLoss.forward`` on its batch: entries ``[K, ...]``.
