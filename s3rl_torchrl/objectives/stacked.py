@@ -1,11 +1,13 @@
 """K independent SAC-Lag agents updated as one batched computation (several seeds, one process).
 
 :class:`StackedSACLag` takes ``K`` :class:`~s3rl_torchrl.objectives.SACLagLoss` of one
-architecture (one per seed) and stacks every parameter and buffer of theirs into one tensor
-with a leading seed dimension ``[K, ...]``. Each agent's own tensors then become views of its
+architecture (one per seed) and stacks each of their per-agent tensors (actor, critics, target
+critics, log alpha, lambda: ``PER_AGENT``) into one tensor with a leading seed dimension
+``[K, ...]``. Each agent's own tensors then become views of its
 slice, so the agents stay ordinary single-seed objects for everything else (collecting with
 their actor, the contrastive phase on their encoder, evaluation, ``state_dict``), while a
-gradient step runs the loss once under ``torch.vmap`` over the seed dimension:
+gradient step runs the loss once under ``torch.vmap`` over the seed dimension (a template
+copy of the loss reads the agent's tensors through properties):
 
 * the group's objective is the SUM of the agents' losses, so agent ``k``'s gradient is exactly
   its single-run gradient (nothing mixes across the seed dimension: every op is vmapped);
