@@ -23,20 +23,25 @@ def machine() -> dict[str, str]:
 
 
 def interleaved_rounds(
-    cases: dict[str, Callable[[], object]], calls: int, rounds: int, warmup: int
+    cases: dict[str, Callable[[], object]],
+    calls: int,
+    rounds: int,
+    warmup: int,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> dict[str, list[float]]:
     """Microseconds per call of every case, one value per round. Each round times every case in
-    turn, so that load from other processes hits them all alike."""
+    turn, so that load from other processes hits them all alike. ``clock``: wall time by
+    default; ``time.process_time`` counts this process's CPU time only."""
     for fn in cases.values():
         for _ in range(warmup):
             fn()
     times: dict[str, list[float]] = {name: [] for name in cases}
     for _ in range(rounds):
         for name, fn in cases.items():
-            start = time.perf_counter()
+            start = clock()
             for _ in range(calls):
                 fn()
-            times[name].append((time.perf_counter() - start) / calls * 1e6)
+            times[name].append((clock() - start) / calls * 1e6)
     return times
 
 

@@ -28,4 +28,5 @@ from s3rl_torchrl.objectives.sac_lag import (  # noqa: F401
     make_sac_lag_optimizers,
     sac_lag_update,
 )
+from s3rl_torchrl.objectives.stacked import StackedSACLag  # noqa: F401
 from s3rl_torchrl.objectives.target_update import ForeachSoftUpdate  # noqa: F401

@@ -4,6 +4,7 @@
     s3rl-train algo=sac_lag task=SafetyHopperVelocity-v1 seed=20 collector.total_frames=20000
     s3rl-train -m seed=10,20 algo=s3rl,sac_lag  # a sweep
     s3rl-train resume=outputs/s3rl/.../<run>    # continue an interrupted run
+    s3rl-train 'seeds=[10,20,30,40,50]'         # five seeds in one process, one batched update
 
 The loop lives in :mod:`s3rl_torchrl.trainer`; this file only parses and validates the config.
 """
@@ -17,7 +18,14 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from s3rl_torchrl.recipes import config_dir
-from s3rl_torchrl.trainer import CheckpointError, ConfigError, register_configs, train, validate
+from s3rl_torchrl.trainer import (
+    CheckpointError,
+    ConfigError,
+    register_configs,
+    train,
+    train_seeds,
+    validate,
+)
 
 CONFIG_DIR = str(config_dir())
 register_configs()
@@ -27,12 +35,17 @@ register_configs()
 def _main(cfg: DictConfig) -> float:
     try:
         train_cfg = validate(cfg)
-        result = train(train_cfg, HydraConfig.get().runtime.output_dir)
+        output_dir = HydraConfig.get().runtime.output_dir
+        if train_cfg.seeds is not None:
+            results = train_seeds(train_cfg, output_dir).runs
+        else:
+            results = [train(train_cfg, output_dir)]
     except (ConfigError, CheckpointError, FileExistsError) as err:
         print(f"s3rl-train: {err}", file=sys.stderr)
         sys.exit(2)
-    # The return value is what Hydra sweepers (e.g. Optuna) optimise.
-    return result.final_eval.reward_mean if result.final_eval is not None else float("nan")
+    # The return value is what Hydra sweepers (e.g. Optuna) optimise (the mean over seeds).
+    rewards = [r.final_eval.reward_mean for r in results if r.final_eval is not None]
+    return sum(rewards) / len(rewards) if len(rewards) == len(results) else float("nan")
 
 
 def main() -> None:

@@ -26,6 +26,7 @@ from s3rl_torchrl.trainer.config import (
 )
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
 from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, compile_loss, train
+from s3rl_torchrl.trainer.multiseed import MultiSeedResult, MultiSeedTrainer, train_seeds
 
 __all__ = [
     "AlgoConfig",
@@ -38,6 +39,8 @@ __all__ = [
     "EvalResult",
     "EvalRunConfig",
     "LoggerConfig",
+    "MultiSeedResult",
+    "MultiSeedTrainer",
     "NetworkConfig",
     "PIDConfig",
     "TaskConfig",
@@ -51,5 +54,6 @@ __all__ = [
     "register_configs",
     "save_checkpoint",
     "train",
+    "train_seeds",
     "validate",
 ]

@@ -319,6 +319,9 @@ class TrainConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
     seed: int = 10
+    # Several seeds in one process (trainer/multiseed.py): K independent agents, one batched
+    # gradient step; `seed` is then unused (each seed's sub-run records its own).
+    seeds: list[int] | None = None
     device: str = "cpu"
     # torch intra-op threads; 0 keeps torch's default. One is the robust choice on 2 shared
     # cores: two threads stall whenever another process runs (docs/benchmarks.md).
@@ -337,6 +340,8 @@ class TrainConfig:
         _check_range(prefix + "save_interval", self.save_interval, 1)
         if self.compile and self.device == "cpu":
             _check_cpp_compiler(prefix + "compile")
+        if self.seeds is not None:
+            self._check_seeds(prefix + "seeds")
         if self.collector.frames_per_epoch % self.collector.frames_per_batch:
             _fail(
                 prefix + "collector.frames_per_epoch",
@@ -345,6 +350,22 @@ class TrainConfig:
                 f"({self.collector.frames_per_batch})",
             )
         _check_learns(self.collector, self.algo, prefix)
+
+    def _check_seeds(self, path: str) -> None:
+        seeds = list(self.seeds)
+        if not seeds:
+            _fail(path, seeds, "must hold at least one seed (or be null: one run with `seed`)")
+        if any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
+            _fail(path, seeds, "must be integers")
+        if len(set(seeds)) != len(seeds):
+            _fail(path, seeds, "must be distinct (a repeated seed would train the same run twice)")
+        if self.algo.update_order != "joint":
+            _fail(
+                path,
+                seeds,
+                f"needs algo.update_order=joint (multi-seed training batches the joint update; "
+                f"got {self.algo.update_order!r})",
+            )
 
 
 @dataclass

@@ -349,8 +349,12 @@ class Trainer:
         return losses.detach()
 
     def _gradient_step(self) -> None:
+        self._after_gradient_step(self._update(self.replay_buffer.sample()))
+
+    def _after_gradient_step(self, losses: TensorDictBase) -> None:
+        """Counters, last losses and, every ``T`` steps, the contrastive phase (shared with
+        the multi-seed trainer, whose gradient steps are batched over seeds)."""
         agent = self.agent
-        losses = self._update(self.replay_buffer.sample())
         self.counters.grad_steps += 1
         self.counters.pending_updates -= 1.0
         self._last_losses = dict(losses.items())
