@@ -214,9 +214,7 @@ class MultiSeedTrainer:
                 return False
             self._gradient_step()
         for index, member in enumerate(self.members):
-            if member.counters.frames // self.cfg.collector.frames_per_epoch > (
-                member.counters.epochs
-            ):
+            if member._epochs_due() > member.counters.epochs:
                 with self._seed_rng(index):
                     member._end_epoch()
         return not self.stop.requested or lead.frames >= self.cfg.collector.total_frames

@@ -149,3 +149,16 @@ def test_cli_trains_a_group(tmp_path):
     out = run("s3rl-train", *TINY, "algo=sac", "seeds=[11,11]", f"hydra.run.dir={run_dir}",
               cwd=tmp_path)
     assert out.returncode == 2 and "distinct" in out.stderr
+
+
+def test_each_seed_closes_a_shorter_last_epoch(tiny_config, tmp_path):
+    # 500 frames in epochs of 200: as a single run, every seed logs rows at 200, 400 and the
+    # run's end (500) and saves its final checkpoint there.
+    cfg = tiny_config("algo=sac", "collector.total_frames=500", f"seeds=[{SEEDS[0]},{SEEDS[1]}]")
+    result = train_seeds(cfg, tmp_path)
+    assert result.status == "finished"
+    for seed in SEEDS:
+        run_dir = tmp_path / f"seed{seed}"
+        assert [int(r["frames"]) for r in read_metrics(run_dir)] == [200, 400, 500]
+        state = torch.load(run_dir / "checkpoints/latest/state.pt", weights_only=True)
+        assert state["counters"]["frames"] == 500 and state["counters"]["epochs"] == 3
