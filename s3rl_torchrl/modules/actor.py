@@ -19,6 +19,7 @@ from torchrl.envs.utils import ExplorationType
 from torchrl.modules import AdditiveGaussianModule, ProbabilisticActor, TanhNormal
 
 from s3rl_torchrl.modules.activation import ReLU
+from s3rl_torchrl.modules.critics import init_orthogonal_
 
 __all__ = [
     "DeterministicHead",
@@ -175,11 +176,7 @@ def build_s3rl_actor(
         return_log_prob=True,
         default_interaction_type=ExplorationType.RANDOM,
     )
-    for module in actor.modules():
-        if isinstance(module, nn.Linear):
-            nn.init.orthogonal_(module.weight)
-            nn.init.zeros_(module.bias)
-    return actor
+    return init_orthogonal_(actor)  # FSRL's initialisation, as the critics
 
 
 def _policy_encoder(
@@ -242,11 +239,7 @@ def build_deterministic_actor(
         out_keys=[action_key],
     )
     actor = TensorDictSequential(encoder, head)
-    for module in actor.modules():
-        if isinstance(module, nn.Linear):
-            nn.init.orthogonal_(module.weight)
-            nn.init.zeros_(module.bias)
-    return actor
+    return init_orthogonal_(actor)  # FSRL's initialisation, as the critics
 
 
 def build_ddpg_exploration(
