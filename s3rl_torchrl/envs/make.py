@@ -14,6 +14,7 @@ from torchrl.data import Composite, Unbounded
 from torchrl.envs import (
     DoubleToFloat,
     EnvBase,
+    GymEnv,
     GymWrapper,
     InitTracker,
     ParallelEnv,
@@ -97,7 +98,9 @@ def make_base_env(
     spec = get_task(task)  # fail early, listing the valid names
     require_task_module(spec)
     if num_envs == 0:
-        env = GymWrapper(gym.make(spec.gym_id, **gym_kwargs), device=device)
+        # GymEnv, not GymWrapper(gym.make(...)): it takes torchrl's own options too
+        # (from_pixels, pixels_only, frame_skip) and passes the rest to gymnasium.make.
+        env = GymEnv(spec.gym_id, device=device, **gym_kwargs)
     else:
         vector_env = gym.make_vec(
             spec.gym_id,

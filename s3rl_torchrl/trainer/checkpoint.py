@@ -8,6 +8,7 @@ swapped in by renames, so a crash mid-write leaves the previous checkpoint intac
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import shutil
@@ -20,6 +21,7 @@ import torch
 CHECKPOINT_FORMAT = "s3rl-torchrl/1"
 STATE_FILE = "state.pt"
 REPLAY_DIR = "replay_buffer"
+GROUP_FILE = "seeds.json"  # at the root of a multi-seed run: the group's config, seeds included
 
 
 class CheckpointError(RuntimeError):
@@ -89,6 +91,14 @@ def resolve_checkpoint(path: str | Path) -> Path:
     for candidate in candidates:
         if candidate.is_file():
             return candidate
+    group_file = path / GROUP_FILE
+    if group_file.is_file():
+        seeds = json.loads(group_file.read_text())["seeds"]
+        raise CheckpointError(
+            f"{str(path)!r} is a multi-seed run (seeds {seeds}): resume the group with "
+            f"resume={path} 'seeds=[{','.join(map(str, seeds))}]', or name one seed's run "
+            f"directory, e.g. {path / f'seed{seeds[0]}'}."
+        )
     raise CheckpointError(
         f"No checkpoint found at {str(path)!r}: expected a run directory (with "
         f"checkpoints/latest/{STATE_FILE}), a checkpoint directory, or a {STATE_FILE} file."

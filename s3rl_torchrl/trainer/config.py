@@ -387,8 +387,15 @@ class EvalRunConfig:
             _check_range("max_steps", self.max_steps, 1)
 
 
+def run_dir_name(seed: int, seeds: list[int] | None) -> str:
+    """The seed part of a run's default directory: ``seed10``, or ``seeds10-20-30`` for a group."""
+    return f"seeds{'-'.join(map(str, seeds))}" if seeds else f"seed{seed}"
+
+
 def register_configs() -> None:
-    """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore."""
+    """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore,
+    and the ``s3rl_run_name`` resolver the default output directories use."""
+    OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(name="eval_schema", node=EvalRunConfig)

@@ -30,11 +30,9 @@ from tensordict import TensorDictBase
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.objectives.stacked import StackedSACLag, draw_noise
-from s3rl_torchrl.trainer.checkpoint import CheckpointError
+from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.loop import StopRequest, Trainer, TrainResult, compile_loss
-
-GROUP_FILE = "seeds.json"  # the group's config (seeds included), at the group's root
 
 
 def seed_dir(group_dir: str | Path, seed: int) -> Path:

@@ -121,6 +121,10 @@ def test_resume_needs_the_groups_seeds(tiny_config, tmp_path):
     cfg.seeds, cfg.resume = [11, 12], None
     with pytest.raises(FileExistsError, match="multi-seed run"):
         MultiSeedTrainer(cfg, tmp_path)
+    # A single-seed resume (or s3rl-eval) of the group's directory says how to name it.
+    cfg.seeds, cfg.resume = None, str(tmp_path)
+    with pytest.raises(CheckpointError, match=r"multi-seed run \(seeds \[11, 12\]\).*seed11"):
+        Trainer(cfg, tmp_path)
 
 
 @pytest.mark.parametrize(
@@ -139,10 +143,10 @@ def test_bad_seeds_fail_before_training(overrides, match, tiny_config):
 def test_cli_trains_a_group(tmp_path):
     from tests.trainer.test_cli import TINY, run
 
-    run_dir = tmp_path / "group"
-    out = run("s3rl-train", *TINY, "algo=sac", "seeds=[11,12]", f"hydra.run.dir={run_dir}",
-              cwd=tmp_path)
+    # The default output directory names the group's seeds.
+    out = run("s3rl-train", *TINY, "algo=sac", "seeds=[11,12]", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
+    (run_dir,) = (tmp_path / "outputs/sac/SafetyHalfCheetahVelocity-v1/seeds11-12").iterdir()
     for seed in SEEDS:
         assert f"sac SafetyHalfCheetahVelocity-v1 seed {seed}" in out.stdout
         assert (run_dir / f"seed{seed}" / "final_eval.json").is_file()
