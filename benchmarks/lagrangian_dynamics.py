@@ -48,13 +48,13 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import write_report  # noqa: E402
 
-# Controller settings of the comparison (issue 15), as s3rl-train overrides on top of
+# Controller settings of the comparison, as s3rl-train overrides on top of
 # experiment=paper (--experiment) algo=sac_lag; frames_per_epoch stays the experiment's.
 SETTINGS: dict[str, list[str]] = {
     "fsrl": ["pid=fsrl"],  # the paper's PID in FSRL's form, one update per 20-episode collect
     "pid_ema": ["pid=ema"],  # the same gains, OmniSafe's EMA of error and cost, delay 10
     # Twice as many updates (10 episodes each, 2000 gradient steps between them): the schedule
-    # of issue 15's run. With 10 envs in lockstep on 1000-step episodes a smaller batch does not
+    # of the first cycling runs. With 10 envs in lockstep on 1000-step episodes a smaller batch does not
     # update more often: episodes only end every 10000 frames.
     "fsrl_10k": ["pid=fsrl", "collector.frames_per_batch=10000"],
     "learned": ["algo.lagrangian=learned"],  # Adam on lambda (J - d), OmniSafe's SACLag

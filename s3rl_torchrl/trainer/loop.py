@@ -319,8 +319,9 @@ class Trainer:
             )
 
     def _updates_owed(self, frames: int) -> float:
-        # No learning from the uniform-random warm-up frames alone (FSRL starts after them);
-        # the rule is shared with the config check that refuses runs which would never learn.
+        # No learning from the uniform-random warm-up frames alone (torchrl's and the SOTA
+        # scripts' habit; FSRL has no random warm-up, docs/objectives.md); the rule is shared
+        # with the config check that refuses runs which would never learn.
         cfg = self.cfg
         stored = len(self.replay_buffer)
         return updates_owed(self.counters.frames, frames, stored, cfg.collector, cfg.algo)

@@ -159,7 +159,7 @@ def test_learned_lagrangian_bad_arguments():
 # ------------------------------------------------------------------ controllers in a closed loop
 # A synthetic plant for the policy: the cost of the next collect falls linearly with the
 # multiplier in force while the policy trains, J_{t+1} = max(0, J0 - k lambda_t) (+ noise).
-# J0 = 900 and k = 486 fit the SAC-Lag run of issue 15 on HalfCheetah (J ~ 900 at lambda ~ 0,
+# J0 = 900 and k = 486 fit the cycling SAC-Lag run on HalfCheetah (J ~ 900 at lambda ~ 0,
 # ~ 270 at lambda 1.3): the cost that meets the limit d = 10 needs lambda* = 890 / 486 = 1.83.
 PLANT = {"J0": 900.0, "k": 486.0}
 LIMIT = 10.0
