@@ -133,6 +133,8 @@ def test_resume_needs_the_groups_seeds(tiny_config, tmp_path):
         (["seeds=[]"], "at least one seed"),
         (["seeds=[10,10]"], "distinct"),
         (["seeds=[10,20]", "algo.update_order=fsrl"], "update_order=joint"),
+        (["seeds=[10,20]", "algo=ddpg_lag"], "SAC family only.*'ddpg_lag'"),
+        (["seeds=[10,20]", "algo=s3rl_ddpg_lag"], "SAC family only"),
     ],
 )
 def test_bad_seeds_fail_before_training(overrides, match, tiny_config):
