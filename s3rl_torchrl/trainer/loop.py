@@ -324,8 +324,12 @@ class Trainer:
         stored = len(self.replay_buffer)
         return updates_owed(self.counters.frames, frames, stored, cfg.collector, cfg.algo)
 
+    def _update(self, batch: TensorDictBase) -> TensorDictBase:
+        """One gradient step of the algorithm (builders.build_agent); the detached losses."""
+        return self.agent.update(batch)
+
     def _gradient_step(self) -> None:
-        self._after_gradient_step(self.agent.update(self.replay_buffer.sample()))
+        self._after_gradient_step(self._update(self.replay_buffer.sample()))
 
     def _after_gradient_step(self, losses: TensorDictBase) -> None:
         """Counters, last losses and, every ``T`` steps, the contrastive phase (shared with
