@@ -225,8 +225,21 @@ def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("update_order", ["joint", "fsrl"])
-def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp_path):
+def test_compiled_update_trains_the_same_schedule(
+    update_order, tiny_config, tmp_path, monkeypatch
+):
     # compile=true: the loss (joint) or its two halves (fsrl) go through torch.compile.
+    from s3rl_torchrl.trainer import loop
+
+    wrapped = []
+
+    def recording_compile(fn):
+        compiled = compile_loss(fn)
+        wrapped.append((fn, compiled))
+        return compiled
+
+    compile_loss = loop.compile_loss
+    monkeypatch.setattr(loop, "compile_loss", recording_compile)
     cfg = tiny_config(
         "algo=sac_lag",
         f"algo.update_order={update_order}",
@@ -235,11 +248,11 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         "collector.frames_per_epoch=300",
     )
     trainer = Trainer(cfg, tmp_path)
-    compiled = [trainer._loss_forward] if update_order == "joint" else [
-        trainer._critic_loss, trainer._actor_loss
-    ]
+    loss = trainer.agent.loss
+    expected = [loss] if update_order == "joint" else [loss.critic_loss, loss.actor_loss]
+    assert [fn for fn, _ in wrapped] == expected
     assert all(hasattr(fn, "_torchdynamo_orig_callable") or hasattr(fn, "_orig_mod")
-               for fn in compiled)
+               for _, fn in wrapped)
     from torch._dynamo.utils import counters
 
     counters.clear()
