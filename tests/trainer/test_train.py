@@ -265,7 +265,7 @@ def test_compiled_update_trains_the_same_schedule(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1)])
+@pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1), ("ddpg_lag", 2), ("ddpg", 1)])
 def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_path):
     cfg = tiny_config(f"algo={algo}", f"algo.n_step={n_step}", "collector.total_frames=300")
     trainer = Trainer(cfg, tmp_path)
@@ -278,15 +278,17 @@ def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_pat
         ("next", "terminated"), ("next", "safe"),
         "index",  # torchrl's TensorDict writer stores each transition's slot
     }
-    if algo == "s3rl":
+    if algo in ("s3rl", "ddpg_lag"):
         needed.add(("next", "cost"))
     if n_step > 1:
         needed.add("steps_to_next_obs")
     assert stored == needed
     # ... and none of what the collector, the transforms and the policy also write.
-    collected = set(trainer.train_env.rollout(3, trainer.agent.actor).keys(True, True))
-    assert {"embedding", "loc", "scale", "action_log_prob", ("next", "episode_reward"),
-            ("next", "step_count")} <= collected
+    collected = set(trainer.train_env.rollout(3, trainer.agent.policy).keys(True, True))
+    policy_outputs = {"embedding"} | (
+        set() if "ddpg" in algo else {"loc", "scale", "action_log_prob"}
+    )
+    assert policy_outputs | {("next", "episode_reward"), ("next", "step_count")} <= collected
 
 
 def test_critics_keep_their_own_initialisation(tiny_config):
