@@ -348,7 +348,7 @@ def make_ddpg_lag_optimizers(
 
 
 def ddpg_lag_update(
-    loss: DDPGLagLoss,
+    loss: DDPGLoss,
     batch: TensorDictBase,
     optimizers: DDPGLagOptimizers,
     target_updater=None,
@@ -356,11 +356,19 @@ def ddpg_lag_update(
     """One gradient step in FSRL's order (``DDPGLagrangian.learn``): critics, actor, targets.
 
     The actor loss sees the critics *after* their step. Returns the detached losses and the
-    diagnostics ``reward_q``, ``cost_q``, ``lagrangian``.
+    diagnostics ``reward_q``, ``cost_q``, ``lagrangian``. With torchrl's ``DDPGLoss`` (no cost
+    critic, unconstrained DDPG) it is the same step without the cost entries.
     """
-    critic = loss.critic_loss(batch)
+    constrained = isinstance(loss, DDPGLagLoss)
+    if constrained:
+        critic = loss.critic_loss(batch)
+        critic_total = critic["loss_value"] + critic["loss_cost_value"]
+    else:
+        loss_value, _ = loss.loss_value(batch)
+        critic = {"loss_value": loss_value}
+        critic_total = loss_value
     optimizers.critic.zero_grad(set_to_none=True)
-    (critic["loss_value"] + critic["loss_cost_value"]).backward()
+    critic_total.backward()
     optimizers.critic.step()
 
     loss_actor, metadata = loss.loss_actor(batch)
@@ -369,13 +377,13 @@ def ddpg_lag_update(
     optimizers.actor.step()
     if target_updater is not None:
         target_updater.step()
-    return TensorDict(
-        {
-            "loss_actor": loss_actor.detach(),
-            "loss_value": critic["loss_value"].detach(),
-            "loss_cost_value": critic["loss_cost_value"].detach(),
-            **metadata,
-            "lagrangian": loss.lagrangian.detach().clone(),
-        },
-        batch_size=[],
-    )
+    out = {
+        "loss_actor": loss_actor.detach(),
+        **{key: value.detach() for key, value in critic.items()},
+        **metadata,
+    }
+    if constrained:
+        out["lagrangian"] = loss.lagrangian.detach().clone()
+    else:  # DDPGLoss's actor loss is -Q_r(s, mu(s)) and returns no diagnostics
+        out["reward_q"] = -loss_actor.detach()
+    return TensorDict(out, batch_size=[])

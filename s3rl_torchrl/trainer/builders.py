@@ -5,14 +5,16 @@ Each builder returns a plain TorchRL object, so a user can take one piece into t
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
 from torch import nn
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs import EnvBase
-from torchrl.modules import ProbabilisticActor
-from torchrl.objectives import SoftUpdate
+from torchrl.objectives import DDPGLoss, LossModule, SoftUpdate
 
 from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.envs import make_env
@@ -20,11 +22,15 @@ from s3rl_torchrl.modules import (
     ContrastivePhase,
     ReLU,
     build_cost_qvalue_network,
+    build_ddpg_exploration,
+    build_deterministic_actor,
     build_qvalue_network,
     build_s3rl_actor,
     get_policy_encoder,
 )
 from s3rl_torchrl.objectives import (
+    DDPGLagLoss,
+    DDPGLagOptimizers,
     ForeachSoftUpdate,
     LagrangianController,
     LearnedLagrangian,
@@ -32,7 +38,10 @@ from s3rl_torchrl.objectives import (
     SACLagLoss,
     SACLagOptimizers,
     SafetyInfoNCELoss,
+    ddpg_lag_update,
+    make_ddpg_lag_optimizers,
     make_sac_lag_optimizers,
+    sac_lag_update,
 )
 from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
 
@@ -66,16 +75,29 @@ def build_envs(cfg: TrainConfig) -> tuple[EnvBase, EnvBase]:
     return train_env, test_env
 
 
+Update = Callable[[TensorDictBase], TensorDictBase]
+CompileFn = Callable[[Callable], Callable]
+
+
 @dataclass
 class Agent:
-    """The learnable parts of a run and what updates them."""
+    """The learnable parts of a run and what updates them.
 
-    actor: ProbabilisticActor
-    loss: SACLagLoss
+    ``policy`` collects (SAC: the stochastic actor; DDPG: the actor plus exploration noise),
+    ``actor`` is evaluated deterministically, ``update(batch)`` takes one gradient step
+    (critics, actor, temperature, targets) and returns the detached losses and diagnostics,
+    whose names are ``log_keys``.
+    """
+
+    policy: TensorDictModuleBase
+    actor: TensorDictModuleBase
+    loss: LossModule
     target_updater: SoftUpdate
-    optimizers: SACLagOptimizers
+    optimizers: SACLagOptimizers | DDPGLagOptimizers
     lagrangian: LagrangianController | None
     contrastive: ContrastivePhase | None
+    update: Update
+    log_keys: tuple[str, ...]
 
 
 def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianController | None:
@@ -101,22 +123,22 @@ def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianControlle
 
 
 def build_agent(
-    cfg: TrainConfig, env: EnvBase, replay_buffer: TensorDictReplayBuffer | None
+    cfg: TrainConfig,
+    env: EnvBase,
+    replay_buffer: TensorDictReplayBuffer | None,
+    compile_fn: CompileFn | None = None,
 ) -> Agent:
-    """Actor, critics, ``SACLagLoss``, optimisers, Lagrangian and contrastive phase."""
+    """Actor, critics, loss, optimisers, update, Lagrangian and contrastive phase.
+
+    ``algo.family`` (config.ALGO_FAMILIES) picks SAC (``SACLagLoss``) or DDPG (``DDPGLagLoss``,
+    or torchrl's ``DDPGLoss`` when unconstrained); ``compile_fn`` (e.g. ``torch.compile``)
+    wraps the SAC family's loss calls.
+    """
     algo, net = cfg.algo, cfg.network
     observation_dim = env.observation_spec["observation"].shape[-1]
     action_spec = env.action_spec_unbatched
     action_dim = action_spec.shape[-1]
     activation = ACTIVATIONS[net.activation]
-
-    actor = build_s3rl_actor(
-        observation_dim,
-        action_spec,
-        hidden=tuple(net.actor_hidden),
-        log_std_bounds=(net.log_std_min, net.log_std_max),
-        activation=activation,
-    )
 
     # One module per critic (a list), so each keeps its own orthogonal init (FSRL); a single
     # module would be copied and re-initialised by torchrl.
@@ -128,30 +150,73 @@ def build_agent(
             for _ in range(count)
         ]
 
-    num_qvalue_nets = 2  # double critics (paper, FSRL)
-    qvalue = critics(build_qvalue_network, num_qvalue_nets)
     constrained = algo.lagrangian != "none"
-    # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only cost
-    # time, so the loss is built without them (it is then exactly SACLoss).
-    cost_qvalue = (
-        critics(build_cost_qvalue_network, num_qvalue_nets * NUM_COSTS) if constrained else None
-    )
-    loss = SACLagLoss(
-        actor,
-        qvalue,
-        cost_qvalue,
-        num_costs=NUM_COSTS if constrained else 0,
-        num_qvalue_nets=num_qvalue_nets,
-        alpha_init=algo.alpha_init,
-        fixed_alpha=not algo.auto_alpha,
-        action_spec=action_spec,
-        entropy_in_cost_target=algo.cost_entropy,
-        rescaling=algo.rescaling,
-        lagrangian_init=algo.lagrangian_init if constrained else 0.0,
-    )
-    loss.make_value_estimator(gamma=algo.gamma)
-    target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
-    optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
+    if algo.family == "ddpg":
+        actor = build_deterministic_actor(
+            observation_dim, action_spec, hidden=tuple(net.actor_hidden), activation=activation
+        )
+        policy = build_ddpg_exploration(actor, action_spec, sigma=algo.exploration_noise)
+        (value,) = critics(build_qvalue_network, 1)  # one critic of each kind (FSRL)
+        if constrained:
+            (cost_value,) = critics(build_cost_qvalue_network, 1)
+            loss = DDPGLagLoss(
+                actor,
+                value,
+                cost_value,
+                num_costs=NUM_COSTS,
+                rescaling=algo.rescaling,
+                lagrangian_init=algo.lagrangian_init,
+            )
+        else:  # lambda fixed at 0: DDPGLagLoss would equal DDPGLoss with an unused cost critic
+            loss = DDPGLoss(actor, value, delay_actor=True, delay_value=True, loss_function="l2")
+        loss.make_value_estimator(gamma=algo.gamma)
+        target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
+        optimizers = make_ddpg_lag_optimizers(loss, algo.actor_lr, algo.critic_lr)
+
+        def update(batch: TensorDictBase) -> TensorDictBase:
+            return ddpg_lag_update(loss, batch, optimizers, target_updater)
+
+        log_keys = ("loss_actor", "loss_value", "reward_q")
+        if constrained:
+            log_keys += ("loss_cost_value", "cost_q")
+    else:
+        actor = build_s3rl_actor(
+            observation_dim,
+            action_spec,
+            hidden=tuple(net.actor_hidden),
+            log_std_bounds=(net.log_std_min, net.log_std_max),
+            activation=activation,
+        )
+        policy = actor
+        num_qvalue_nets = 2  # double critics (paper, FSRL)
+        qvalue = critics(build_qvalue_network, num_qvalue_nets)
+        # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only
+        # cost time, so the loss is built without them (it is then exactly SACLoss).
+        cost_qvalue = (
+            critics(build_cost_qvalue_network, num_qvalue_nets * NUM_COSTS)
+            if constrained
+            else None
+        )
+        loss = SACLagLoss(
+            actor,
+            qvalue,
+            cost_qvalue,
+            num_costs=NUM_COSTS if constrained else 0,
+            num_qvalue_nets=num_qvalue_nets,
+            alpha_init=algo.alpha_init,
+            fixed_alpha=not algo.auto_alpha,
+            action_spec=action_spec,
+            entropy_in_cost_target=algo.cost_entropy,
+            rescaling=algo.rescaling,
+            lagrangian_init=algo.lagrangian_init if constrained else 0.0,
+        )
+        loss.make_value_estimator(gamma=algo.gamma)
+        target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
+        optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
+        update = _sac_update(
+            loss, optimizers, target_updater, algo.update_order, compile_fn or (lambda fn: fn)
+        )
+        log_keys = tuple(k for k in loss.out_keys if k != "lagrangian")
     lagrangian = build_lagrangian(algo, cfg.task.cost_limit) if constrained else None
 
     contrastive = None
@@ -171,7 +236,58 @@ def build_agent(
         contrastive = ContrastivePhase(
             infonce, view, c.lr, num_steps=c.steps, target_updater=updater
         )
-    return Agent(actor, loss, target_updater, optimizers, lagrangian, contrastive)
+    return Agent(
+        policy,
+        actor,
+        loss,
+        target_updater,
+        optimizers,
+        lagrangian,
+        contrastive,
+        update,
+        log_keys,
+    )
+
+
+def _sac_update(
+    loss: SACLagLoss,
+    optimizers: SACLagOptimizers,
+    target_updater: SoftUpdate,
+    update_order: str,
+    compile_fn: CompileFn,
+) -> Update:
+    """The SAC family's gradient step in ``update_order`` (config.AlgoConfig)."""
+    if update_order == "fsrl":
+        critic_loss, actor_loss = compile_fn(loss.critic_loss), compile_fn(loss.actor_loss)
+
+        def update(batch: TensorDictBase) -> TensorDictBase:
+            return sac_lag_update(
+                loss,
+                batch,
+                optimizers,
+                target_updater,
+                critic_loss=critic_loss,
+                actor_loss=actor_loss,
+            )
+
+        return update
+
+    loss_forward = compile_fn(loss)
+    active = [o for o in optimizers if o is not None]
+
+    def update(batch: TensorDictBase) -> TensorDictBase:
+        # The paper's Algorithm 3: every loss from one forward, one backward, every optimiser.
+        losses = loss_forward(batch)
+        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
+        for optimizer in active:
+            optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        for optimizer in active:
+            optimizer.step()
+        target_updater.step()
+        return losses.detach()
+
+    return update
 
 
 def build_replay_buffer(algo: AlgoConfig) -> TensorDictReplayBuffer:

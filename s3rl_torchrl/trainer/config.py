@@ -19,7 +19,19 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
 from s3rl_torchrl.trainer.schedule import collector_batch_frames, planned_gradient_steps
 
-ALGO_NAMES = ("s3rl", "sac_lag", "sac", "s3rl_nolag")
+# The algorithm registry: `algo=<name>` (configs/algo/<name>.yaml) -> its family, which decides
+# the actor, the loss and the gradient step (trainer/builders.py). Adding an algorithm of an
+# existing family is one entry here and one YAML.
+ALGO_FAMILIES = {
+    "s3rl": "sac",
+    "sac_lag": "sac",
+    "sac": "sac",
+    "s3rl_nolag": "sac",
+    "ddpg_lag": "ddpg",
+    "ddpg": "ddpg",
+    "s3rl_ddpg_lag": "ddpg",
+}
+ALGO_NAMES = tuple(ALGO_FAMILIES)
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
 UPDATE_ORDERS = ("joint", "fsrl")
 ACTIVATIONS = ("relu", "tanh", "elu", "silu")
@@ -144,7 +156,10 @@ class ContrastiveConfig:
 
 @dataclass
 class AlgoConfig:
-    """SAC with an optional Lagrangian and an optional contrastive phase (defaults: paper)."""
+    """SAC or DDPG with an optional Lagrangian and an optional contrastive phase.
+
+    Defaults: the paper's (SAC family); configs/algo/ddpg*.yaml set FSRL's DDPG-Lag values.
+    """
 
     name: str = "s3rl"
     lagrangian: str = "pid"
@@ -167,11 +182,21 @@ class AlgoConfig:
     # "joint": one forward, one backward of the summed losses (the paper's Algorithm 3; faster).
     # "fsrl": critics step first, then the actor loss on the updated critics, then alpha.
     update_order: str = "joint"
+    # DDPG family: std of the Gaussian exploration noise in [-1, 1] action units (FSRL 0.1).
+    exploration_noise: float = 0.1
     buffer_size: int = 100_000
     contrastive_cfg: ContrastiveConfig = field(default_factory=ContrastiveConfig)
 
+    @property
+    def family(self) -> str:
+        """``"sac"`` or ``"ddpg"`` (:data:`ALGO_FAMILIES`)."""
+        return ALGO_FAMILIES.get(self.name, "")
+
     def check(self, path: str) -> None:
         _check_choice(f"{path}.name", self.name, ALGO_NAMES)
+        if self.family == "ddpg" and self.update_order != "fsrl":
+            # DDPG(-Lag) steps in FSRL's order only (ddpg_lag_update): critics, then the actor.
+            _fail(f"{path}.update_order", self.update_order, "DDPG algorithms need fsrl")
         _check_choice(f"{path}.lagrangian", self.lagrangian, LAGRANGIAN_CHOICES)
         _check_choice(f"{path}.update_order", self.update_order, UPDATE_ORDERS)
         self.pid.check(f"{path}.pid")
@@ -185,6 +210,7 @@ class AlgoConfig:
             _check_range(f"{path}.{name}", getattr(self, name), 0.0, low_inclusive=False)
         _check_range(f"{path}.batch_size", self.batch_size, 1)
         _check_range(f"{path}.update_per_step", self.update_per_step, 0.0, low_inclusive=False)
+        _check_range(f"{path}.exploration_noise", self.exploration_noise, 0.0)
         _check_range(f"{path}.buffer_size", self.buffer_size, self.batch_size)
 
 
@@ -359,6 +385,14 @@ class TrainConfig:
             _fail(path, seeds, "must be integers")
         if len(set(seeds)) != len(seeds):
             _fail(path, seeds, "must be distinct (a repeated seed would train the same run twice)")
+        if self.algo.family != "sac":
+            _fail(
+                path,
+                seeds,
+                f"multi-seed training supports the SAC family only "
+                f"({', '.join(n for n, f in ALGO_FAMILIES.items() if f == 'sac')}); "
+                f"got algo.name={self.algo.name!r}: train its seeds as separate runs",
+            )
         if self.algo.update_order != "joint":
             _fail(
                 path,

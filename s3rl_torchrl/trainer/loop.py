@@ -1,4 +1,5 @@
-"""The training loop of S3RL, SAC-Lag and SAC: collect, store, update lambda, update, evaluate.
+"""The off-policy training loop (S3RL, SAC-Lag, SAC, DDPG-Lag, ...): collect, store, update
+lambda, update, evaluate.
 
 Read top to bottom: :func:`train` builds everything from a :class:`TrainConfig`, then runs one
 iteration per collected batch:
@@ -6,8 +7,9 @@ iteration per collected batch:
 1. store the batch (n-step transitions, one storage) in the replay buffer;
 2. update lambda once from the mean cost of the training episodes that ended in the batch
    (none ended: no update), as FSRL does before that collect's gradient steps;
-3. run ``update_per_step`` gradient steps per collected frame (critics, actor, alpha, then the
-   target critics), and every ``T`` gradient steps the contrastive phase on the policy encoder;
+3. run ``update_per_step`` gradient steps per collected frame (the algorithm's ``update``:
+   critics, actor, alpha for SAC, then the targets), and every ``T`` gradient steps the
+   contrastive phase on the policy encoder;
 4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
 
 Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
@@ -34,7 +36,7 @@ from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.modules import get_policy_encoder
-from s3rl_torchrl.objectives import make_nstep_transform, sac_lag_update
+from s3rl_torchrl.objectives import make_nstep_transform
 from s3rl_torchrl.report.probe import replay_probe
 from s3rl_torchrl.trainer.builders import (
     Agent,
@@ -172,25 +174,21 @@ class Trainer:
         seed_everything(cfg.seed)
         self.train_env, self.test_env = build_envs(cfg)
         self.replay_buffer = build_replay_buffer(cfg.algo)
-        self.agent: Agent = build_agent(cfg, self.train_env, self.replay_buffer)
+        # torch.compile of the SAC family's loss (its forward and, through AOTAutograd, its
+        # backward); the optimiser and target steps stay eager (fused Adam, one foreach lerp).
+        # The first steps pay the compile time (docs/benchmarks.md says when it pays off).
+        self.agent: Agent = build_agent(
+            cfg, self.train_env, self.replay_buffer, compile_loss if cfg.compile else None
+        )
         # n-step windows need consecutive batches of the same env copies: the transform keeps
         # the last n frames of each copy until the next batch (paper: n = 2).
         self.nstep = (
             make_nstep_transform(cfg.algo.n_step, cfg.algo.gamma) if cfg.algo.n_step > 1 else None
         )
-        self._optimizers = [o for o in self.agent.optimizers if o is not None]
         # The buffer keeps what is read back from it, nothing else: a sample gathers every stored
         # entry, and the collector and transforms write ~27 (episode sums, counters, the
         # policy's outputs, ...), which made drawing a batch cost 0.86 ms instead of 0.58.
         self._stored_keys = self._keys_read_from_buffer()
-        # torch.compile of the loss (its forward and, through AOTAutograd, its backward); the
-        # optimiser and target steps stay eager (fused Adam, one foreach lerp). The first steps
-        # pay the compile time (docs/benchmarks.md says when it pays off).
-        loss = self.agent.loss
-        maybe_compile = compile_loss if cfg.compile else (lambda fn: fn)
-        self._loss_forward = maybe_compile(loss)
-        self._critic_loss = maybe_compile(loss.critic_loss)
-        self._actor_loss = maybe_compile(loss.actor_loss)
         self.counters = Counters()
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
@@ -272,7 +270,7 @@ class Trainer:
         remaining = cfg.collector.total_frames - c.frames
         return Collector(
             self.train_env,
-            self.agent.actor,
+            self.agent.policy,  # DDPG: the actor with exploration noise
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
             init_random_frames=max(0, cfg.collector.init_random_frames - c.frames),
@@ -289,7 +287,7 @@ class Trainer:
         """The losses' inputs (n-step reward and discount exponent included), the sampler's
         safe/unsafe label and the contrastive encoder's inputs."""
         loss = self.agent.loss
-        keys = [*loss.in_keys, loss.tensor_keys.steps_to_next_obs]
+        keys = [*loss.in_keys, loss.value_estimator.tensor_keys.steps_to_next_obs]
         keys.append(self.replay_buffer.sampler.label_key)
         phase = self.agent.contrastive
         if phase is not None:
@@ -327,27 +325,8 @@ class Trainer:
         return updates_owed(self.counters.frames, frames, stored, cfg.collector, cfg.algo)
 
     def _update(self, batch: TensorDictBase) -> TensorDictBase:
-        """One gradient step on a batch; returns the detached losses and diagnostics."""
-        agent = self.agent
-        if self.cfg.algo.update_order == "fsrl":
-            return sac_lag_update(
-                agent.loss,
-                batch,
-                agent.optimizers,
-                agent.target_updater,
-                critic_loss=self._critic_loss,
-                actor_loss=self._actor_loss,
-            )
-        # The paper's Algorithm 3: every loss from one forward, one backward, every optimiser.
-        losses = self._loss_forward(batch)
-        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
-        for optimizer in self._optimizers:
-            optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        for optimizer in self._optimizers:
-            optimizer.step()
-        agent.target_updater.step()
-        return losses.detach()
+        """One gradient step of the algorithm (builders.build_agent); the detached losses."""
+        return self.agent.update(batch)
 
     def _gradient_step(self) -> None:
         self._after_gradient_step(self._update(self.replay_buffer.sample()))
@@ -389,7 +368,6 @@ class Trainer:
         c = self.counters
         episodes = self._train_episodes
         nan = float("nan")
-        lagrangian = self.agent.loss.lagrangian
         row: dict[str, Any] = {
             "frames": c.frames,
             "epoch": c.epochs,
@@ -397,7 +375,7 @@ class Trainer:
             "train/episodes": len(episodes),
             "train/reward": float(np.mean([r for r, _ in episodes])) if episodes else nan,
             "train/cost": float(np.mean([k for _, k in episodes])) if episodes else nan,
-            "lagrangian": float(lagrangian.sum()) if lagrangian.numel() else 0.0,
+            "lagrangian": self._lagrangian_value(),
             "eval/reward": result.reward_mean,
             "eval/reward_std": result.reward_std,
             "eval/cost": result.cost_mean,
@@ -406,9 +384,7 @@ class Trainer:
             "eval/safe_occupancy": result.safe_occupancy,
             "eval/seconds": eval_seconds,
         }
-        for key in self.agent.loss.out_keys:
-            if key == "lagrangian":  # logged above as the sum over costs
-                continue
+        for key in self.agent.log_keys:
             value = self._last_losses.get(key)
             row[f"train/{key}"] = float(value.float().mean()) if value is not None else nan
         for key in CONTRASTIVE_DIAGNOSTICS:
@@ -426,12 +402,16 @@ class Trainer:
 
     def _progress_postfix(self) -> dict[str, str]:
         last = self.history[-1] if self.history else {}
-        lagrangian = self.agent.loss.lagrangian
         return {
             "reward": f"{last.get('eval/reward', float('nan')):.1f}",
             "cost": f"{last.get('eval/cost', float('nan')):.1f}",
-            "lambda": f"{float(lagrangian.sum()) if lagrangian.numel() else 0.0:.3f}",
+            "lambda": f"{self._lagrangian_value():.3f}",
         }
+
+    def _lagrangian_value(self) -> float:
+        """Sum of lambda over the costs; 0 for unconstrained runs (torchrl's DDPGLoss has none)."""
+        lagrangian = getattr(self.agent.loss, "lagrangian", None)
+        return float(lagrangian.sum()) if lagrangian is not None and lagrangian.numel() else 0.0
 
     def _final_evaluation(self) -> EvalResult:
         cfg = self.cfg

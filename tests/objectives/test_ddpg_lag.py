@@ -332,3 +332,28 @@ def test_deterministic_actor_formula_and_init():
         build_deterministic_actor(OBS, spec, ())
     with pytest.raises(ValueError, match="sigma"):
         build_ddpg_exploration(actor, spec, sigma=-0.1)
+
+
+def test_update_step_with_torchrl_ddpgloss_follows_fsrl_order():
+    # Unconstrained DDPG (s3rl-train algo=ddpg): torchrl's DDPGLoss, same step without costs.
+    def ddpg():
+        actor, critic, _ = make_nets(1)
+        loss = DDPGLoss(actor, critic, delay_actor=True, delay_value=True)
+        loss.make_value_estimator(gamma=GAMMA)
+        return loss
+
+    loss, twin = ddpg(), ddpg()
+    optimizers = make_ddpg_lag_optimizers(loss, actor_lr=1e-3, critic_lr=1e-3)
+    batch = make_batch()
+    # Independent reference: torchrl's own losses, critic step first, then the actor loss.
+    twin_opt = make_ddpg_lag_optimizers(twin, actor_lr=1e-3, critic_lr=1e-3)
+    expected_value, _ = twin.loss_value(batch.clone())
+    expected_value.backward()
+    twin_opt.critic.step()
+    expected_actor, _ = twin.loss_actor(batch.clone())
+
+    stats = ddpg_lag_update(loss, batch, optimizers, SoftUpdate(loss, tau=0.05))
+    assert set(stats.keys()) == {"loss_actor", "loss_value", "reward_q"}
+    torch.testing.assert_close(stats["loss_value"], expected_value.detach())
+    torch.testing.assert_close(stats["loss_actor"], expected_actor.detach())
+    torch.testing.assert_close(stats["reward_q"], -expected_actor.detach())

@@ -22,9 +22,24 @@ def test_defaults_are_quick_s3rl_on_half_cheetah(compose):
 def test_every_algo_and_experiment_composes(algo, experiment, compose):
     cfg = validate(compose(f"algo={algo}", f"experiment={experiment}"))
     assert cfg.algo.name == algo
-    expect_lag = algo in ("s3rl", "sac_lag")
+    expect_lag = algo in ("s3rl", "sac_lag", "ddpg_lag", "s3rl_ddpg_lag")
     assert (cfg.algo.lagrangian != "none") == expect_lag
     assert cfg.algo.contrastive == algo.startswith("s3rl")
+    assert cfg.algo.family == ("ddpg" if "ddpg" in algo else "sac")
+    # DDPG steps in FSRL's order (critics, then the actor); the SAC family keeps its default.
+    assert cfg.algo.update_order == ("fsrl" if "ddpg" in algo else "joint")
+
+
+@pytest.mark.parametrize(
+    ("overrides", "match"),
+    [
+        (("algo=ddpg_lag", "algo.update_order=joint"), "'algo.update_order': DDPG"),
+        (("algo=ddpg", "algo.exploration_noise=-0.1"), "'algo.exploration_noise'"),
+    ],
+)
+def test_ddpg_options_are_checked(overrides, match, compose):
+    with pytest.raises(ConfigError, match=match):
+        validate(compose(*overrides))
 
 
 @pytest.mark.parametrize("task", task_names())

@@ -17,14 +17,15 @@ from s3rl_torchrl.trainer import (
     train,
     train_seeds,
 )
-from s3rl_torchrl.trainer.config import ALGO_NAMES
+from s3rl_torchrl.trainer.config import ALGO_FAMILIES
 from s3rl_torchrl.trainer.metrics import read_metrics
 from tests.trainer.test_train import FINAL_EVAL_KEYS, expected_grad_steps
 
 SEEDS = [11, 12]
 
 
-@pytest.mark.parametrize("algo", ALGO_NAMES)
+# The SAC family (the DDPG family is refused: test_bad_seeds_fail_before_training).
+@pytest.mark.parametrize("algo", [name for name, f in ALGO_FAMILIES.items() if f == "sac"])
 def test_each_seed_writes_a_single_runs_files(algo, tiny_config, tmp_path):
     # Swimmer-v1 pays costs under a random policy now and then: the contrastive phase runs.
     cfg = tiny_config(f"algo={algo}", "task=SafetySwimmerVelocity-v1", "task.cost_limit=0",
@@ -133,6 +134,8 @@ def test_resume_needs_the_groups_seeds(tiny_config, tmp_path):
         (["seeds=[]"], "at least one seed"),
         (["seeds=[10,10]"], "distinct"),
         (["seeds=[10,20]", "algo.update_order=fsrl"], "update_order=joint"),
+        (["seeds=[10,20]", "algo=ddpg_lag"], "SAC family only.*'ddpg_lag'"),
+        (["seeds=[10,20]", "algo=s3rl_ddpg_lag"], "SAC family only"),
     ],
 )
 def test_bad_seeds_fail_before_training(overrides, match, tiny_config):

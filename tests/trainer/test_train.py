@@ -62,11 +62,42 @@ def test_tiny_run_per_algo(algo, tiny_config, tmp_path):
     else:
         assert c.contrastive_phases == 0
     lagrangian = [float(r["lagrangian"]) for r in rows]
-    if algo in ("s3rl", "sac_lag"):
+    if algo in ("s3rl", "sac_lag", "ddpg_lag", "s3rl_ddpg_lag"):
         # Swimmer episodes last 1000 steps: none ends in 600 frames, so lambda never moves.
         assert c.lagrangian_updates == 0 and lagrangian == [0.0, 0.0, 0.0]
+        # The cost critic trains and its loss is logged.
+        cost_key = "train/loss_cost_value" if "ddpg" in algo else "train/loss_cost_qvalue"
+        assert all(np.isfinite(float(r[cost_key])) for r in rows)
     else:
         assert result.final_eval is not None and lagrangian == [0.0, 0.0, 0.0]
+    assert all(np.isfinite(float(r["train/loss_actor"])) for r in rows)
+
+
+@pytest.mark.parametrize("algo", ["ddpg_lag", "ddpg"])
+def test_ddpg_collects_with_noise_and_evaluates_the_actor(algo, tiny_config, tmp_path):
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+    from torchrl.objectives import DDPGLoss
+
+    from s3rl_torchrl.objectives import DDPGLagLoss
+
+    trainer = Trainer(tiny_config(f"algo={algo}"), tmp_path)
+    agent = trainer.agent
+    assert type(agent.loss) is (DDPGLagLoss if algo == "ddpg_lag" else DDPGLoss)
+    obs = trainer.train_env.reset()
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        deterministic = agent.actor(obs.clone())["action"]
+        assert torch.equal(agent.policy(obs.clone())["action"], deterministic)
+    torch.manual_seed(0)
+    with set_exploration_type(ExplorationType.RANDOM):  # the collector's exploration type
+        noisy = agent.policy(obs.clone())["action"]
+    # Gaussian noise of std sigma * (high - low) / 2, then clipped to the action bounds.
+    spec = trainer.train_env.action_spec_unbatched
+    half_range = (spec.space.high - spec.space.low) / 2
+    torch.manual_seed(0)
+    noise = torch.randn_like(deterministic) * trainer.cfg.algo.exploration_noise * half_range
+    expected = (deterministic + noise).clamp(spec.space.low, spec.space.high)
+    assert not torch.equal(noisy, deterministic)
+    assert torch.allclose(noisy, expected, atol=1e-6)
 
 
 def test_lagrangian_updates_once_per_batch_with_finished_episodes(tiny_config, tmp_path):
@@ -86,8 +117,9 @@ def _counters(result):
 
 
 @pytest.mark.slow
-def test_resume_at_epoch_end_matches_uninterrupted_run(tiny_config, tmp_path):
-    cfg = tiny_config("algo=s3rl", "task=SafetySwimmerVelocity-v1")
+@pytest.mark.parametrize("algo", ["s3rl", "ddpg_lag"])
+def test_resume_at_epoch_end_matches_uninterrupted_run(algo, tiny_config, tmp_path):
+    cfg = tiny_config(f"algo={algo}", "task=SafetySwimmerVelocity-v1")
     full = train(cfg, tmp_path / "full")
 
     def stop_after_first_epoch(trainer: Trainer, row):
@@ -193,8 +225,21 @@ def test_fsrl_update_order_trains_the_same_schedule(tiny_config, tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("update_order", ["joint", "fsrl"])
-def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp_path):
+def test_compiled_update_trains_the_same_schedule(
+    update_order, tiny_config, tmp_path, monkeypatch
+):
     # compile=true: the loss (joint) or its two halves (fsrl) go through torch.compile.
+    from s3rl_torchrl.trainer import loop
+
+    wrapped = []
+
+    def recording_compile(fn):
+        compiled = compile_loss(fn)
+        wrapped.append((fn, compiled))
+        return compiled
+
+    compile_loss = loop.compile_loss
+    monkeypatch.setattr(loop, "compile_loss", recording_compile)
     cfg = tiny_config(
         "algo=sac_lag",
         f"algo.update_order={update_order}",
@@ -203,11 +248,11 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
         "collector.frames_per_epoch=300",
     )
     trainer = Trainer(cfg, tmp_path)
-    compiled = [trainer._loss_forward] if update_order == "joint" else [
-        trainer._critic_loss, trainer._actor_loss
-    ]
+    loss = trainer.agent.loss
+    expected = [loss] if update_order == "joint" else [loss.critic_loss, loss.actor_loss]
+    assert [fn for fn, _ in wrapped] == expected
     assert all(hasattr(fn, "_torchdynamo_orig_callable") or hasattr(fn, "_orig_mod")
-               for fn in compiled)
+               for _, fn in wrapped)
     from torch._dynamo.utils import counters
 
     counters.clear()
@@ -220,7 +265,7 @@ def test_compiled_update_trains_the_same_schedule(update_order, tiny_config, tmp
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1)])
+@pytest.mark.parametrize("algo, n_step", [("s3rl", 2), ("sac", 1), ("ddpg_lag", 2), ("ddpg", 1)])
 def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_path):
     cfg = tiny_config(f"algo={algo}", f"algo.n_step={n_step}", "collector.total_frames=300")
     trainer = Trainer(cfg, tmp_path)
@@ -233,15 +278,17 @@ def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_pat
         ("next", "terminated"), ("next", "safe"),
         "index",  # torchrl's TensorDict writer stores each transition's slot
     }
-    if algo == "s3rl":
+    if algo in ("s3rl", "ddpg_lag"):
         needed.add(("next", "cost"))
     if n_step > 1:
         needed.add("steps_to_next_obs")
     assert stored == needed
     # ... and none of what the collector, the transforms and the policy also write.
-    collected = set(trainer.train_env.rollout(3, trainer.agent.actor).keys(True, True))
-    assert {"embedding", "loc", "scale", "action_log_prob", ("next", "episode_reward"),
-            ("next", "step_count")} <= collected
+    collected = set(trainer.train_env.rollout(3, trainer.agent.policy).keys(True, True))
+    policy_outputs = {"embedding"} | (
+        set() if "ddpg" in algo else {"loc", "scale", "action_log_prob"}
+    )
+    assert policy_outputs | {("next", "episode_reward"), ("next", "step_count")} <= collected
 
 
 def test_critics_keep_their_own_initialisation(tiny_config):
