@@ -26,6 +26,7 @@ from s3rl_torchrl.objectives import (
     ddpg_lag_update,
     make_ddpg_lag_optimizers,
 )
+from tests.objectives._gradients import moved
 
 OBS, ACT, HIDDEN, GAMMA = 5, 2, (16, 16), 0.9
 COST_KEY = "state_action_cost_value"
@@ -161,24 +162,13 @@ def test_gradient_isolation():
         )
     }
 
-    def moved(value):
-        flat = [p for ps in groups.values() for p in ps]
-        gs = torch.autograd.grad(value, flat, retain_graph=True, allow_unused=True)
-        result, i = {}, 0
-        for name, ps in groups.items():
-            result[name] = any(
-                g is not None and bool(g.abs().sum() > 0) for g in gs[i : i + len(ps)]
-            )
-            i += len(ps)
-        return result
-
-    assert moved(out["loss_value"]) == {"actor": False, "critic": True, "cost_critic": False}
-    assert moved(out["loss_cost_value"]) == {
+    assert moved(out["loss_value"], groups) == {"actor": False, "critic": True, "cost_critic": False}
+    assert moved(out["loss_cost_value"], groups) == {
         "actor": False,
         "critic": False,
         "cost_critic": True,
     }
-    assert moved(out["loss_actor"]) == {"actor": True, "critic": False, "cost_critic": False}
+    assert moved(out["loss_actor"], groups) == {"actor": True, "critic": False, "cost_critic": False}
 
 
 def test_update_step_follows_fsrl_order_and_soft_update_covers_cost_critic():

@@ -24,6 +24,7 @@ from s3rl_torchrl.objectives import (
     make_sac_lag_optimizers,
     sac_lag_update,
 )
+from tests.objectives._gradients import moved
 
 OBS, ACT, HIDDEN, GAMMA, ALPHA = 5, 2, (16, 16), 0.9, 0.005
 MODES = ("batched_mlp", "fused_vmap", "vmap")
@@ -325,24 +326,13 @@ def test_gradient_isolation():
         "alpha": [loss.log_alpha],
     }
 
-    def moved(value):
-        flat = [p for ps in groups.values() for p in ps]
-        gs = torch.autograd.grad(value, flat, retain_graph=True, allow_unused=True)
-        result, i = {}, 0
-        for name, ps in groups.items():
-            result[name] = any(
-                g is not None and bool(g.abs().sum() > 0) for g in gs[i : i + len(ps)]
-            )
-            i += len(ps)
-        return result
-
-    assert moved(out["loss_qvalue"] + out["loss_cost_qvalue"]) == {
+    assert moved(out["loss_qvalue"] + out["loss_cost_qvalue"], groups) == {
         "actor": False,
         "critics": True,
         "alpha": False,
     }
-    assert moved(out["loss_actor"]) == {"actor": True, "critics": False, "alpha": False}
-    assert moved(out["loss_alpha"]) == {"actor": False, "critics": False, "alpha": True}
+    assert moved(out["loss_actor"], groups) == {"actor": True, "critics": False, "alpha": False}
+    assert moved(out["loss_alpha"], groups) == {"actor": False, "critics": False, "alpha": True}
 
 
 @pytest.mark.parametrize("critic_eval", ["fused_vmap", "vmap"])
