@@ -426,10 +426,26 @@ def run_dir_name(seed: int, seeds: list[int] | None) -> str:
     return f"seeds{'-'.join(map(str, seeds))}" if seeds else f"seed{seed}"
 
 
+def episode_frames(task_name: str, episodes: int) -> int:
+    """Frames in ``episodes`` whole episodes of a task: FSRL's ``episode_per_collect`` as a
+    torchrl batch size (``${s3rl_episode_frames:${task.name},20}`` in ``experiment=paper``)."""
+    _check_choice("task.name", task_name, tuple(task_names()))
+    return int(episodes) * get_task(task_name).max_episode_steps
+
+
+def round_up(value: int, multiple: int) -> int:
+    """``value`` rounded up to a multiple of ``multiple``: FSRL's epoch runs whole collects until
+    ``step_per_epoch`` frames are reached (``${s3rl_round_up:10000,${collector.frames_per_batch}}``)."""
+    return math.ceil(int(value) / int(multiple)) * int(multiple)
+
+
 def register_configs() -> None:
     """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore,
-    and the ``s3rl_run_name`` resolver the default output directories use."""
+    and the resolvers the YAMLs use: ``s3rl_run_name`` (default output directories),
+    ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
+    OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)
+    OmegaConf.register_new_resolver("s3rl_round_up", round_up, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(name="eval_schema", node=EvalRunConfig)

@@ -63,6 +63,28 @@ def test_paper_experiment_matches_table_3(compose):
     assert a.contrastive_cfg.temperature == 0.7 and a.rescaling
     assert cfg.network.actor_hidden == [128, 128] and cfg.save_interval == 4
     assert cfg.task.cost_limit == 10.0
+    assert c.init_random_frames == 20_000  # one collect: FSRL has no warm-up
+
+
+# FSRL's collect is 20 whole episodes and its epoch whole collects until step_per_epoch = 10000
+# frames: (task, episode length from docs/tasks.md, frames per collect, frames per epoch).
+@pytest.mark.parametrize(
+    ("task", "collect", "epoch"),
+    [
+        ("SafetyHalfCheetahVelocity-v1", 20 * 1000, 20_000),  # one collect per epoch
+        ("SafetyBallRun-v0", 20 * 100, 10_000),  # five collects
+        ("SafetyDroneRun-v0", 20 * 200, 12_000),  # three collects: 8000 < 10000 <= 12000
+        ("SafetyPointCircle1-v0", 20 * 500, 10_000),  # one collect
+    ],
+)
+def test_paper_collects_are_fsrl_episode_collects_per_task(task, collect, epoch, compose):
+    c = validate(compose("experiment=paper", f"task={task}")).collector
+    assert (c.frames_per_batch, c.frames_per_epoch, c.init_random_frames) == (collect, epoch, collect)
+
+
+def test_paper_collect_follows_an_override_of_the_batch(compose):
+    c = validate(compose("experiment=paper", "collector.frames_per_batch=4000")).collector
+    assert (c.frames_per_batch, c.frames_per_epoch, c.init_random_frames) == (4000, 12_000, 4000)
 
 
 def test_pid_options_fsrl_by_default_and_the_damped_ema(compose):
