@@ -12,6 +12,14 @@ at a time; an existing run directory is resumed, a finished one skipped), then s
     python benchmarks/lagrangian_dynamics.py launch --tasks SafetyHalfCheetahVelocity-v1 \\
         --settings fsrl pid_ema --seeds 10 20 30 --frames 300000 --runs-dir runs/lagrangian
 
+With ``--group`` the seeds of a task and setting train in ONE process (``s3rl-train
+'seeds=[10,20,30]'``, the multi-seed trainer, eager: ``compile=false``), written to
+``<runs-dir>/<task>/<setting>/seed<k>/`` and resumed as a group.
+
+``summarise --until FRAMES`` reads every run as if it had stopped at ``FRAMES`` (its epochs up to
+there, its lambda updates up to there, no final evaluation): a 1M-frame run then counts as a
+300k-frame run of the same setting.
+
 or run the controllers of those settings on the synthetic plant of the unit tests instead of a
 policy (``J_{t+1} = max(0, J0 - k lambda_t + noise)``, no training, seconds)::
 
@@ -54,9 +62,15 @@ SETTINGS: dict[str, list[str]] = {
     "fsrl": ["pid=fsrl"],  # the paper's PID in FSRL's form, one update per 20-episode collect
     "pid_ema": ["pid=ema"],  # the same gains, OmniSafe's EMA of error and cost, delay 10
     # Twice as many updates (10 episodes each, 2000 gradient steps between them): the schedule
-    # of the first cycling runs. With 10 envs in lockstep on 1000-step episodes a smaller batch does not
-    # update more often: episodes only end every 10000 frames.
-    "fsrl_10k": ["pid=fsrl", "collector.frames_per_batch=10000"],
+    # of the first cycling runs. With 10 envs in lockstep on 1000-step episodes a smaller batch
+    # does not update more often: episodes only end every 10000 frames. Warm-up and evaluation
+    # cadence stay those of the 20000-frame collects (the 1000-step tasks), for comparability.
+    "fsrl_10k": [
+        "pid=fsrl",
+        "collector.frames_per_batch=10000",
+        "collector.init_random_frames=20000",
+        "collector.frames_per_epoch=20000",
+    ],
     "learned": ["algo.lagrangian=learned"],  # Adam on lambda (J - d), OmniSafe's SACLag
 }
 BASE_OVERRIDES = ["algo=sac_lag", "threads=1", "logger.progress_bar=false"]
@@ -128,10 +142,13 @@ def lambda_updates(run_dir: Path) -> list[tuple[float, float]]:
         return [(float(r[0]), float(r[1])) for r in csv.reader(f) if len(r) >= 2]
 
 
-def summarise_run(run_dir: Path) -> dict:
-    """One run's second-half statistics (see the module docstring)."""
+def summarise_run(run_dir: Path, until: int | None = None) -> dict:
+    """One run's second-half statistics (see the module docstring); with ``until``, of its
+    epochs up to that many frames, as if it had stopped there."""
     config = json.loads((run_dir / "config.json").read_text())
     rows = read_rows(run_dir / "metrics.csv")
+    if until is not None:
+        rows = [r for r in rows if _float(r["frames"]) <= until]
     if not rows:
         raise ValueError(f"{run_dir}: metrics.csv has no epoch yet")
     limit = float(config["task"]["cost_limit"])
@@ -145,7 +162,7 @@ def summarise_run(run_dir: Path) -> dict:
         return sum(v > limit for v in values) / len(values) if values else math.nan
 
     lams = col["lagrangian"]
-    updates = [lam for f, lam in lambda_updates(run_dir) if f > half]
+    updates = [lam for f, lam in lambda_updates(run_dir) if half < f <= frames[-1]]
     summary = {
         "run_dir": str(run_dir),
         "task": config["task"]["name"],
@@ -167,7 +184,7 @@ def summarise_run(run_dir: Path) -> dict:
         "final_cost": math.nan,
     }
     final = run_dir / "final_eval.json"
-    if final.exists():
+    if final.exists() and until is None:
         result = json.loads(final.read_text())
         summary["final_reward"] = result["reward_mean"]
         summary["final_cost"] = result["cost_mean"]
@@ -244,13 +261,15 @@ def plot(runs: list[dict], path: Path) -> None:
     print(f"wrote {path}")
 
 
-def summarise(run_dirs: list[Path], out: Path | None, csv_dir: Path | None, plot_path) -> dict:
+def summarise(
+    run_dirs: list[Path], out: Path | None, csv_dir: Path | None, plot_path, until=None
+) -> dict:
     runs = []
     for run_dir in run_dirs:
         if not (run_dir / "metrics.csv").exists():
             print(f"skipping {run_dir}: no metrics.csv", file=sys.stderr)
             continue
-        runs.append(summarise_run(run_dir))
+        runs.append(summarise_run(run_dir, until))
     table = aggregate(runs)
     print(markdown(table))
     report = {"runs": runs, "settings": table}
@@ -270,6 +289,28 @@ def launch(args: argparse.Namespace) -> list[Path]:
     todo, run_dirs = [], []
     for task in args.tasks:
         for setting in args.settings:
+            if args.group:
+                group_dir = (args.runs_dir / task / setting).resolve()
+                seed_dirs = [group_dir / f"seed{seed}" for seed in args.seeds]
+                run_dirs.extend(seed_dirs)
+                if all((d / "final_eval.json").exists() for d in seed_dirs):
+                    continue
+                seeds = ",".join(map(str, args.seeds))
+                overrides = [
+                    f"experiment={args.experiment}",
+                    *BASE_OVERRIDES,
+                    *SETTINGS[setting],
+                    f"task={task}",
+                    f"seeds=[{seeds}]",
+                    f"collector.total_frames={args.frames}",
+                    "compile=false",  # the vmapped step is slower compiled (docs/benchmarks.md)
+                    *args.override,
+                ]
+                if (group_dir / "seeds.json").exists():
+                    overrides.append(f"resume={group_dir}")
+                overrides.append(f"hydra.run.dir={group_dir}")
+                todo.append((group_dir, [sys.executable, "-m", "recipes.train", *overrides]))
+                continue
             for seed in args.seeds:
                 run_dir = (args.runs_dir / task / setting / f"seed{seed}").resolve()
                 run_dirs.append(run_dir)
@@ -380,6 +421,9 @@ def main(argv: list[str] | None = None) -> dict:
         p.add_argument("--csv-dir", type=Path, default=None, help="copy metrics.csv files here")
         p.add_argument("--plot", type=Path, default=None, help="lambda and cost figure (PNG)")
     sub.choices["summarise"].add_argument("run_dirs", nargs="+", type=Path)
+    sub.choices["summarise"].add_argument(
+        "--until", type=int, default=None, help="read runs as if stopped at this many frames"
+    )
     p = sub.choices["launch"]
     p.add_argument("--tasks", nargs="+", default=["SafetyHalfCheetahVelocity-v1"])
     p.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
@@ -390,6 +434,11 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--compile", action=argparse.BooleanOptionalAction, default=True)
     p.add_argument("--override", nargs="*", default=[], help="extra s3rl-train overrides")
+    p.add_argument(
+        "--group",
+        action="store_true",
+        help="train the seeds of a task and setting in one process (multi-seed trainer)",
+    )
     p = sub.add_parser("plant")
     p.add_argument("--j0", type=float, default=900.0, help="cost at lambda = 0")
     p.add_argument("--k", type=float, default=486.0, help="cost removed per unit of lambda")
@@ -402,7 +451,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.mode == "plant":
         return run_plant(args)
     run_dirs = args.run_dirs if args.mode == "summarise" else launch(args)
-    return summarise(run_dirs, args.out, args.csv_dir, args.plot)
+    return summarise(run_dirs, args.out, args.csv_dir, args.plot, getattr(args, "until", None))
 
 
 if __name__ == "__main__":

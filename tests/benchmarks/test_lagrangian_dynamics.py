@@ -93,6 +93,48 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert saved["settings"][0]["seeds"] == [10, 20] and len(saved["runs"]) == 2
 
 
+def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
+    nan = float("nan")
+    rows = [
+        [20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0],
+        [40000, 2, 0.0, 650.0, 90.0, 100.0, 0.0],
+        [60000, 3, 0.0, nan, 1.0, 100.0, 800.0],  # second half of 100000: frames > 50000
+        [80000, 4, 2000.0, 20.0, 100.0, 3000.0, 900.0],
+        [100000, 5, 500.0, 15.0, 0.5, -100.0, 0.0],
+        [120000, 6, 800.0, 0.0, 2.0, 1000.0, 5.0],  # after the cut
+    ]
+    updates = [(20000, 0), (40000, 90), (60000, 1), (80000, 100), (90000, 50), (100000, 0.5)]
+    updates.append((120000, 2))
+    run = fake_run(tmp_path, 10, rows, updates, final=(2500.0, 3.0))
+    s = ld.summarise_run(run, until=100000)
+    assert (s["frames"], s["epochs_second_half"]) == (100000, 3)
+    assert s["eval_cost_over_limit"] == pytest.approx(2 / 3)  # 800, 900 | 0
+    assert s["train_cost_over_limit"] == 1.0  # 20, 15 (the NaN epoch has no episode)
+    assert s["mean_abs_dlambda_epoch"] == pytest.approx((99 + 99.5) / 2)
+    assert s["mean_abs_dlambda_update"] == pytest.approx((99 + 50 + 49.5) / 3)
+    # The final evaluation belongs to the whole run, not to its first 100000 frames.
+    assert math.isnan(s["final_reward"]) and math.isnan(s["final_cost"])
+
+
+def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
+    args = ["launch", "--experiment", "tiny", "--settings", "pid_ema", "--seeds", "1", "2"]
+    args += ["--frames", "400", "--group", "--runs-dir", str(tmp_path / "runs")]
+    report = ld.main(args)
+    (row,) = report["settings"]
+    assert row["seeds"] == [1, 2] and row["frames"] == 400
+    assert row["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
+    group = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "pid_ema"
+    assert (group / "seeds.json").is_file()
+    for seed in (1, 2):
+        config = json.loads((group / f"seed{seed}" / "config.json").read_text())
+        assert config["seed"] == seed and config["algo"]["pid"]["ema_alpha"] == 0.95
+        assert (group / f"seed{seed}" / "final_eval.json").is_file()
+    launched = capsys.readouterr().out
+    assert launched.count("launch:") == 1 and "seeds=[1,2]" in launched
+    ld.main(args)  # finished: nothing is launched again
+    assert "launch:" not in capsys.readouterr().out
+
+
 def test_launch_two_settings_of_tiny_runs_then_skip_them(tmp_path, capsys):
     args = ["launch", "--experiment", "tiny", "--settings", "fsrl", "pid_ema", "--seeds", "1"]
     args += ["--frames", "400", "--no-compile", "--jobs", "2", "--runs-dir", str(tmp_path / "runs")]
