@@ -7,7 +7,7 @@ import shlex
 import sys
 from collections.abc import Sequence
 
-from s3rl_torchrl.report.runs import ReportError
+from s3rl_torchrl.report.runs import ReportError, export_runs
 
 
 def _positive(text: str) -> int:
@@ -40,6 +40,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--tsne-states", type=_positive, default=1000,
                         help="at most this many states per t-SNE panel (default: 1000; "
                              "t-SNE time grows faster than linearly)")
+    parser.add_argument("--export-runs", default=None, metavar="DEST",
+                        help="copy config.json, metrics.csv and final_eval.json of every run "
+                             "to DEST (same layout; no checkpoints) and exit: a small tree to "
+                             "keep in version control, rebuilt with `s3rl-report DEST "
+                             "--no-embeddings`")
     return parser.parse_args(argv)
 
 
@@ -48,6 +53,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from s3rl_torchrl.report.build import build_report
 
     argv = sys.argv[1:] if argv is None else list(argv)
+    if args.export_runs is not None:
+        try:
+            copied = export_runs(args.runs, args.export_runs)
+        except ReportError as err:
+            print(f"s3rl-report: error: {err}", file=sys.stderr)
+            return 2
+        print(f"Copied the results of {len(copied)} runs to {args.export_runs}")
+        return 0
     try:
         report = build_report(
             args.runs,

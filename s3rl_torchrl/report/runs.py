@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -170,6 +171,32 @@ def find_runs(root: str | Path) -> list[Run]:
             f"{METRICS_FILE}, as s3rl-train writes them (outputs/ or multirun/ by default)."
         )
     return [read_run(p) for p in run_dirs]
+
+
+# What a run's results are: small text files. Checkpoints and replay buffers stay behind.
+EXPORTED_FILES = (CONFIG_FILE, METRICS_FILE, FINAL_EVAL_FILE)
+
+
+def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
+    """Copy the results of every run below ``root`` (``config.json``, ``metrics.csv`` and, once
+    finished, ``final_eval.json``) to the same relative place below ``dest``, so that a report
+    can be rebuilt from a small tree kept in version control (``s3rl-report DEST
+    --no-embeddings``). Returns the copied run directories."""
+    root, dest = Path(root), Path(dest)
+    runs = find_runs(root)
+    if dest.resolve().is_relative_to(root.resolve()) or root.resolve().is_relative_to(
+        dest.resolve()
+    ):
+        raise ReportError(f"--export-runs {dest} must lie outside {root} (and not contain it).")
+    copied = []
+    for run in runs:
+        target = dest / run.path.relative_to(root)
+        target.mkdir(parents=True, exist_ok=True)
+        for name in EXPORTED_FILES:
+            if (run.path / name).is_file():
+                shutil.copyfile(run.path / name, target / name)
+        copied.append(target)
+    return copied
 
 
 def flatten(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:

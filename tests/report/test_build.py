@@ -120,6 +120,26 @@ def test_cli_errors_and_success(tmp_path, make_run, capsys):
     assert "s3rl (collector.total_frames=800)" in (tmp_path / "rep" / "report.md").read_text()
 
 
+def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_path, make_run):
+    _sweep(tmp_path, make_run)
+    checkpoint = tmp_path / "sweep" / "s3rl_seed1" / "checkpoints" / "latest" / "state.pt"
+    checkpoint.parent.mkdir(parents=True)
+    checkpoint.write_bytes(b"weights")
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "kept")]) == 0
+    kept = sorted(p.relative_to(tmp_path / "kept").as_posix() for p in (tmp_path / "kept").rglob("*")
+                  if p.is_file())
+    assert "s3rl_seed1/config.json" in kept and "s3rl_seed1/final_eval.json" in kept
+    assert "s3rl_seed4/metrics.csv" in kept and "s3rl_seed4/final_eval.json" not in kept
+    assert not any("checkpoints" in p for p in kept) and len(kept) == 3 * 6 + 2
+    original = build_report(tmp_path / "sweep", tmp_path / "r1", embeddings=False)
+    rebuilt = build_report(tmp_path / "kept", tmp_path / "r2", embeddings=False)
+    table = [line for line in original.path.read_text().splitlines() if line.startswith("| ")]
+    assert table == [line for line in rebuilt.path.read_text().splitlines()
+                     if line.startswith("| ")]
+    # Exporting into the runs' own tree would copy runs into themselves.
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "sweep" / "x")]) == 2
+
+
 @pytest.fixture(scope="module")
 def tiny_runs(tmp_path_factory):
     """S3RL and SAC-Lag, one tiny run each on Swimmer-v1 (it has unsafe states within 600
