@@ -5,9 +5,10 @@
 
 Paper settings (experiment=paper): 10 training envs, 0.2 gradient steps per frame, batch 256,
 128x128 networks, n-step 2, PID Lagrangian, the contrastive phase every 1000 gradient steps.
-The clock runs over ``--frames`` frames *after* the 10 000 warm-up frames (uniform random
-actions, no learning), and evaluation time is subtracted: what is left is collection, storage,
-gradient steps and contrastive phases. Hours per 1M steps = 1e6 / (steps/s) / 3600.
+The clock runs over ``--frames`` frames *after* the first epoch (20 000 frames on HalfCheetah:
+the uniform-random warm-up collect, its gradient steps and the first compilation), and
+evaluation time is subtracted: what is left is collection, storage, gradient steps and
+contrastive phases. ``--frames`` is rounded up to whole epochs. Hours per 1M steps = 1e6 / (steps/s) / 3600.
 """
 
 from __future__ import annotations
@@ -29,11 +30,14 @@ CONFIG_DIR = str(config_dir())
 
 def measure(task: str, frames: int, compiled: bool, threads: int) -> dict:
     register_configs()
-    warmup = 10_000
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        paper = validate(compose(config_name="train", overrides=["experiment=paper", f"task={task}"]))
+    epoch = paper.collector.frames_per_epoch  # the first epoch is the warm-up
+    frames = -(-frames // epoch) * epoch
     overrides = [
         "experiment=paper",
         f"task={task}",
-        f"collector.total_frames={warmup + frames}",
+        f"collector.total_frames={epoch + frames}",
         "eval.episodes=1",
         "eval.random_baseline=false",
         "logger=none",
