@@ -186,8 +186,8 @@ class Trainer:
             cfg, self.train_env, self.replay_buffer, compile_loss if cfg.compile else None
         )
         # What the algorithm's update schedule stores and samples (trainer/schedule.py).
-        self.schedule = cfg.algo.schedule(cfg.collector)
         self.updates = build_updates(cfg, self.agent, self.replay_buffer)
+        self.schedule = self.updates.schedule
         self.counters = Counters()
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)

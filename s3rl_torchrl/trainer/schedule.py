@@ -129,8 +129,9 @@ class OffPolicySchedule(UpdateSchedule):
 class OnPolicySchedule(UpdateSchedule):
     """Collect, GAE on the batch, ``ppo_epochs`` passes of minibatches over it; no warm-up.
 
-    ``collector.init_random_frames``, ``algo.update_per_step`` and ``algo.buffer_size`` are
-    not used: each batch is learnt from once, by the policy that collected it.
+    ``collector.init_random_frames`` and ``algo.update_per_step`` are not used: each batch is
+    learnt from by the policy that collected it, then dropped (``algo.buffer_size`` sizes the
+    FIFO of labelled states the contrastive phase and the probe sample, not a replay buffer).
     """
 
     name = "on_policy"
