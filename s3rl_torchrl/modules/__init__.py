@@ -15,4 +15,5 @@ from s3rl_torchrl.modules.contrastive import ContrastivePhase  # noqa: F401
 from s3rl_torchrl.modules.critics import (  # noqa: F401
     build_cost_qvalue_network,
     build_qvalue_network,
+    build_value_network,
 )

@@ -26,14 +26,19 @@ from s3rl_torchrl.modules.activation import ReLU
 
 __all__ = [
     "COST_QVALUE_KEY",
+    "COST_VALUE_KEY",
     "QVALUE_KEY",
+    "VALUE_KEY",
     "build_cost_qvalue_network",
     "build_qvalue_network",
+    "build_value_network",
     "init_orthogonal_",
 ]
 
 QVALUE_KEY = "state_action_value"
 COST_QVALUE_KEY = "state_action_cost_value"
+VALUE_KEY = "state_value"  # what torchrl's ClipPPOLoss reads
+COST_VALUE_KEY = "state_cost_value"  # what PPOLagLoss reads
 
 
 def init_orthogonal_(module: nn.Module, gain: float = 1.0) -> nn.Module:
@@ -127,3 +132,31 @@ def build_cost_qvalue_network(
         activation_class=activation_class,
         device=device,
     )
+
+
+def build_value_network(
+    observation_dim: int,
+    hidden: Sequence[int] = (128, 128),
+    *,
+    out_key: str = VALUE_KEY,
+    observation_key: str = "observation",
+    activation_class: type[nn.Module] = ReLU,
+    device: torch.device | str | None = None,
+) -> TensorDictModule:
+    """One state-value network ``observation -> out_key`` (``[..., 1]``) for PPO(-Lag).
+
+    FSRL's PPO-Lag critics (``fsrl/agent/ppo_lag_agent.py``: one ``Critic`` per signal over a
+    ``Net`` of ``hidden_sizes``) with the same orthogonal initialisation as the Q-critics; pass
+    ``out_key=COST_VALUE_KEY`` for the cost value network of
+    :class:`~s3rl_torchrl.objectives.PPOLagLoss`.
+    """
+    hidden = _check_dims(observation_dim, 1, hidden, 1)
+    mlp = MLP(
+        in_features=observation_dim,
+        out_features=1,
+        num_cells=list(hidden),
+        activation_class=activation_class,
+        device=device,
+    )
+    init_orthogonal_(mlp)
+    return ValueOperator(mlp, in_keys=[observation_key], out_keys=[out_key])

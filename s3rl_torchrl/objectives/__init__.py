@@ -21,7 +21,13 @@ from s3rl_torchrl.objectives.nstep import (  # noqa: F401
     make_nstep_transform,
     nstep_transition,
 )
-from s3rl_torchrl.objectives.ppo_lag import PPOLagLoss  # noqa: F401
+from s3rl_torchrl.objectives.ppo_lag import (  # noqa: F401
+    PPOLagLoss,
+    PPOLagOptimizers,
+    compute_ppo_advantages,
+    make_ppo_lag_optimizers,
+    ppo_lag_update,
+)
 from s3rl_torchrl.objectives.sac_lag import (  # noqa: F401
     SACLagLoss,
     SACLagOptimizers,

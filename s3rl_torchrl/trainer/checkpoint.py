@@ -61,8 +61,11 @@ def restore_rng_state(state: dict[str, Any]) -> None:
     random.setstate((p["version"], tuple(p["internal"]), p["gauss"]))
 
 
-def save_checkpoint(directory: str | Path, state: dict[str, Any], replay_buffer=None) -> Path:
-    """Write ``state`` (and the replay buffer) to ``directory`` atomically."""
+def save_checkpoint(
+    directory: str | Path, state: dict[str, Any], replay_buffer=None, buffers=None
+) -> Path:
+    """Write ``state`` (and the replay buffer, and ``buffers``: ``{subdirectory: buffer}``,
+    e.g. PPO's rollout) to ``directory`` atomically."""
     directory = Path(directory)
     tmp = directory.with_name(directory.name + ".tmp")
     old = directory.with_name(directory.name + ".old")
@@ -71,6 +74,8 @@ def save_checkpoint(directory: str | Path, state: dict[str, Any], replay_buffer=
     torch.save({"format": CHECKPOINT_FORMAT, **state}, tmp / STATE_FILE)
     if replay_buffer is not None:
         replay_buffer.dumps(tmp / REPLAY_DIR)
+    for name, buffer in (buffers or {}).items():
+        buffer.dumps(tmp / name)
     if directory.exists():
         shutil.rmtree(old, ignore_errors=True)
         os.replace(directory, old)

@@ -17,10 +17,16 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
-from s3rl_torchrl.trainer.schedule import collector_batch_frames, planned_gradient_steps
+from s3rl_torchrl.trainer.schedule import (
+    OffPolicySchedule,
+    OnPolicySchedule,
+    UpdateSchedule,
+    collector_batch_frames,
+)
 
 # The algorithm registry: `algo=<name>` (configs/algo/<name>.yaml) -> its family, which decides
-# the actor, the loss and the gradient step (trainer/builders.py). Adding an algorithm of an
+# the actor, the loss and the gradient step (trainer/builders.py) and, through
+# FAMILY_SCHEDULES, when gradient steps happen (trainer/schedule.py). Adding an algorithm of an
 # existing family is one entry here and one YAML.
 ALGO_FAMILIES = {
     "s3rl": "sac",
@@ -30,8 +36,19 @@ ALGO_FAMILIES = {
     "ddpg_lag": "ddpg",
     "ddpg": "ddpg",
     "s3rl_ddpg_lag": "ddpg",
+    "ppo_lag": "ppo",
+    "ppo": "ppo",
+    "s3rl_ppo_lag": "ppo",
 }
 ALGO_NAMES = tuple(ALGO_FAMILIES)
+# family -> its update schedule: off-policy (replay buffer, warm-up, update_per_step gradient
+# steps per frame) or on-policy (GAE on each collect, ppo_epochs passes of minibatches).
+FAMILY_SCHEDULES: dict[str, type[UpdateSchedule]] = {
+    "sac": OffPolicySchedule,
+    "ddpg": OffPolicySchedule,
+    "ppo": OnPolicySchedule,
+}
+COST_SURROGATES = ("unclipped", "clipped")
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
 UPDATE_ORDERS = ("joint", "fsrl")
 ACTIVATIONS = ("relu", "tanh", "elu", "silu")
@@ -156,9 +173,10 @@ class ContrastiveConfig:
 
 @dataclass
 class AlgoConfig:
-    """SAC or DDPG with an optional Lagrangian and an optional contrastive phase.
+    """SAC, DDPG or PPO with an optional Lagrangian and an optional contrastive phase.
 
-    Defaults: the paper's (SAC family); configs/algo/ddpg*.yaml set FSRL's DDPG-Lag values.
+    Defaults: the paper's (SAC family); configs/algo/ddpg*.yaml set FSRL's DDPG-Lag values and
+    configs/algo/*ppo*.yaml FSRL's PPO-Lag values (fsrl/config/ppol_cfg.py).
     """
 
     name: str = "s3rl"
@@ -184,13 +202,27 @@ class AlgoConfig:
     update_order: str = "joint"
     # DDPG family: std of the Gaussian exploration noise in [-1, 1] action units (FSRL 0.1).
     exploration_noise: float = 0.1
+    # Off-policy: the replay buffer. PPO family: the FIFO of recent labelled states that the
+    # contrastive phase and the linear probe sample (docs/representation.md).
     buffer_size: int = 100_000
+    # PPO family (FSRL's PPO-Lag, fsrl/config/ppol_cfg.py); batch_size is the minibatch size.
+    ppo_epochs: int = 4  # passes over each collected batch (FSRL repeat_per_collect)
+    gae_lambda: float = 0.95
+    clip_epsilon: float = 0.2  # FSRL eps_clip
+    critic_coeff: float = 0.25  # FSRL vf_coef, both critics
+    max_grad_norm: float | None = 0.5  # clip of the gradient norm of all parameters
+    # PPO-Lag's cost term: "unclipped" (FSRL) or "clipped" (OmniSafe), objectives/ppo_lag.py
+    cost_surrogate: str = "unclipped"
     contrastive_cfg: ContrastiveConfig = field(default_factory=ContrastiveConfig)
 
     @property
     def family(self) -> str:
-        """``"sac"`` or ``"ddpg"`` (:data:`ALGO_FAMILIES`)."""
+        """``"sac"``, ``"ddpg"`` or ``"ppo"`` (:data:`ALGO_FAMILIES`)."""
         return ALGO_FAMILIES.get(self.name, "")
+
+    def schedule(self, collector: CollectorConfig) -> UpdateSchedule:
+        """The family's update schedule for these collector settings (:data:`FAMILY_SCHEDULES`)."""
+        return FAMILY_SCHEDULES[self.family](collector, self)
 
     def check(self, path: str) -> None:
         _check_choice(f"{path}.name", self.name, ALGO_NAMES)
@@ -212,6 +244,13 @@ class AlgoConfig:
         _check_range(f"{path}.update_per_step", self.update_per_step, 0.0, low_inclusive=False)
         _check_range(f"{path}.exploration_noise", self.exploration_noise, 0.0)
         _check_range(f"{path}.buffer_size", self.buffer_size, self.batch_size)
+        _check_range(f"{path}.ppo_epochs", self.ppo_epochs, 1)
+        _check_range(f"{path}.gae_lambda", self.gae_lambda, 0.0, 1.0)
+        _check_range(f"{path}.clip_epsilon", self.clip_epsilon, 0.0, low_inclusive=False)
+        _check_range(f"{path}.critic_coeff", self.critic_coeff, 0.0, low_inclusive=False)
+        if self.max_grad_norm is not None:
+            _check_range(f"{path}.max_grad_norm", self.max_grad_norm, 0.0, low_inclusive=False)
+        _check_choice(f"{path}.cost_surrogate", self.cost_surrogate, COST_SURROGATES)
 
 
 @dataclass
@@ -298,13 +337,14 @@ class LoggerConfig:
 
 def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> None:
     """Refuse a run that would evaluate an untrained policy as if it were trained."""
-    if planned_gradient_steps(collector, algo, stop_at=1) > 0:
+    schedule = algo.schedule(collector)
+    if schedule.planned_gradient_steps(stop_at=1) > 0:
         return
     batch = collector_batch_frames(collector)
 
     def learns(**changes: int) -> bool:
         changed = CollectorConfig(**{**vars(collector), **changes})
-        return planned_gradient_steps(changed, algo, stop_at=1) > 0
+        return algo.schedule(changed).planned_gradient_steps(stop_at=1) > 0
 
     options = []
     # The fewest whole batches that learn with the other values unchanged. Bounded: once past
@@ -325,11 +365,8 @@ def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> 
     _fail(
         prefix + "collector.total_frames",
         collector.total_frames,
-        "no gradient step would happen: learning starts with the first batch "
-        f"({batch} frames) that ends at or after {prefix}collector.init_random_frames "
-        f"({collector.init_random_frames}) and leaves at least {prefix}algo.batch_size "
-        f"({algo.batch_size}) transitions in the replay buffer, then takes "
-        f"{prefix}algo.update_per_step ({algo.update_per_step}) steps per frame; "
+        schedule.no_learning_reason(prefix)
+        + "; "
         + ", or ".join(options or ["change these values"]),
     )
 

@@ -1,15 +1,19 @@
-"""The off-policy training loop (S3RL, SAC-Lag, SAC, DDPG-Lag, ...): collect, store, update
-lambda, update, evaluate.
+"""The training loop of every algorithm (S3RL, SAC-Lag, DDPG-Lag, PPO-Lag, ...): collect,
+store, update lambda, update, evaluate.
 
 Read top to bottom: :func:`train` builds everything from a :class:`TrainConfig`, then runs one
 iteration per collected batch:
 
-1. store the batch (n-step transitions, one storage) in the replay buffer;
+1. store the batch as the algorithm's update schedule says (trainer/schedule.py; off-policy:
+   n-step transitions into the replay buffer; on-policy: the advantages (GAE) of the batch,
+   which replaces the previous one, and its labelled states into a FIFO for the contrastive
+   phase);
 2. update lambda once from the mean cost of the training episodes that ended in the batch
    (none ended: no update), as FSRL does before that collect's gradient steps;
-3. run ``update_per_step`` gradient steps per collected frame (the algorithm's ``update``:
-   critics, actor, alpha for SAC, then the targets), and every ``T`` gradient steps the
-   contrastive phase on the policy encoder;
+3. run the gradient steps the schedule owes for the batch (off-policy: ``update_per_step`` per
+   collected frame after the warm-up; on-policy: ``ppo_epochs`` passes of minibatches), each
+   the algorithm's ``update`` (critics, actor, alpha for SAC, then the targets), and every
+   ``T`` gradient steps the contrastive phase on the policy encoder;
 4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
 
 Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
@@ -36,13 +40,13 @@ from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.modules import get_policy_encoder
-from s3rl_torchrl.objectives import make_nstep_transform
 from s3rl_torchrl.report.probe import replay_probe
 from s3rl_torchrl.trainer.builders import (
     Agent,
     build_agent,
     build_envs,
     build_replay_buffer,
+    build_updates,
     set_torch_threads,
 )
 from s3rl_torchrl.trainer.checkpoint import (
@@ -56,7 +60,6 @@ from s3rl_torchrl.trainer.checkpoint import (
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.evaluation import EvalResult, RandomPolicy, evaluate, format_table
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
-from s3rl_torchrl.trainer.schedule import updates_owed
 
 FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
@@ -173,6 +176,8 @@ class Trainer:
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
         self.train_env, self.test_env = build_envs(cfg)
+        # Off-policy: the replay buffer; on-policy: the FIFO of recent labelled states that the
+        # contrastive phase and the probe sample (builders.build_replay_buffer).
         self.replay_buffer = build_replay_buffer(cfg.algo)
         # torch.compile of the SAC family's loss (its forward and, through AOTAutograd, its
         # backward); the optimiser and target steps stay eager (fused Adam, one foreach lerp).
@@ -180,15 +185,9 @@ class Trainer:
         self.agent: Agent = build_agent(
             cfg, self.train_env, self.replay_buffer, compile_loss if cfg.compile else None
         )
-        # n-step windows need consecutive batches of the same env copies: the transform keeps
-        # the last n frames of each copy until the next batch (paper: n = 2).
-        self.nstep = (
-            make_nstep_transform(cfg.algo.n_step, cfg.algo.gamma) if cfg.algo.n_step > 1 else None
-        )
-        # The buffer keeps what is read back from it, nothing else: a sample gathers every stored
-        # entry, and the collector and transforms write ~27 (episode sums, counters, the
-        # policy's outputs, ...), which made drawing a batch cost 0.86 ms instead of 0.58.
-        self._stored_keys = self._keys_read_from_buffer()
+        # What the algorithm's update schedule stores and samples (trainer/schedule.py).
+        self.updates = build_updates(cfg, self.agent, self.replay_buffer)
+        self.schedule = self.updates.schedule
         self.counters = Counters()
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
@@ -273,27 +272,12 @@ class Trainer:
             self.agent.policy,  # DDPG: the actor with exploration noise
             frames_per_batch=cfg.collector.frames_per_batch,
             total_frames=remaining,
-            init_random_frames=max(0, cfg.collector.init_random_frames - c.frames),
+            init_random_frames=max(0, self.schedule.warmup_frames() - c.frames),
             device=cfg.device,
         )
 
     def _store(self, batch: TensorDictBase) -> None:
-        data = self.nstep.inv(batch) if self.nstep is not None else batch
-        if data is not None and data.numel():
-            # Not strict: without n-step returns (n_step=1) there is no `steps_to_next_obs`.
-            self.replay_buffer.extend(data.select(*self._stored_keys, strict=False).reshape(-1))
-
-    def _keys_read_from_buffer(self) -> list:
-        """The losses' inputs (n-step reward and discount exponent included), the sampler's
-        safe/unsafe label and the contrastive encoder's inputs."""
-        loss = self.agent.loss
-        keys = [*loss.in_keys, loss.value_estimator.tensor_keys.steps_to_next_obs]
-        keys.append(self.replay_buffer.sampler.label_key)
-        phase = self.agent.contrastive
-        if phase is not None:
-            role = phase.loss.tensor_keys.contrastive_role  # written by the sampler per batch
-            keys += [key for key in phase.loss.in_keys if key != role]
-        return list(dict.fromkeys(keys))
+        self.updates.store(batch)
 
     def _update_lagrangian(self, batch: TensorDictBase) -> None:
         done = batch["next", "done"].squeeze(-1)
@@ -317,19 +301,17 @@ class Trainer:
             )
 
     def _updates_owed(self, frames: int) -> float:
-        # No learning from the uniform-random warm-up frames alone (torchrl's and the SOTA
-        # scripts' habit; FSRL has no random warm-up, docs/objectives.md); the rule is shared
-        # with the config check that refuses runs which would never learn.
-        cfg = self.cfg
-        stored = len(self.replay_buffer)
-        return updates_owed(self.counters.frames, frames, stored, cfg.collector, cfg.algo)
+        # The schedule's rule, shared with the config check that refuses runs which would never
+        # learn (off-policy: no learning from the uniform-random warm-up frames alone, torchrl's
+        # and the SOTA scripts' habit; FSRL has no random warm-up, docs/objectives.md).
+        return self.updates.owed(self.counters.frames, frames)
 
     def _update(self, batch: TensorDictBase) -> TensorDictBase:
         """One gradient step of the algorithm (builders.build_agent); the detached losses."""
         return self.agent.update(batch)
 
     def _gradient_step(self) -> None:
-        self._after_gradient_step(self._update(self.replay_buffer.sample()))
+        self._after_gradient_step(self._update(self.updates.sample()))
 
     def _after_gradient_step(self, losses: TensorDictBase) -> None:
         """Counters, last losses and, every ``T`` steps, the contrastive phase (shared with
@@ -458,7 +440,10 @@ class Trainer:
 
     def save(self) -> Path:
         return save_checkpoint(
-            self.run_dir / "checkpoints" / "latest", self.state_dict(), self.replay_buffer
+            self.run_dir / "checkpoints" / "latest",
+            self.state_dict(),
+            self.replay_buffer,
+            self.updates.buffers(),
         )
 
     def _restore(self, state: dict[str, Any], checkpoint_dir: Path) -> None:
@@ -472,6 +457,7 @@ class Trainer:
         if agent.contrastive is not None:
             agent.contrastive.load_state_dict(state["contrastive"])
         self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
+        self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         restore_rng_state(state["rng"])
 

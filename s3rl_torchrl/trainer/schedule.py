@@ -1,32 +1,38 @@
-"""When gradient steps happen: the rule the loop follows, and the count it gives for a config.
+"""When gradient steps happen: each algorithm family declares its update schedule.
 
-The loop owes ``update_per_step`` gradient steps per frame of every collected batch that ends at
-or after ``init_random_frames`` (FSRL learns only after the uniform-random warm-up) and leaves at
-least ``batch_size`` transitions in the replay buffer; owed fractions carry over to the next
-batch. :func:`planned_gradient_steps` replays that rule batch by batch without collecting, so a
+A schedule is the rule the loop follows after each collected batch, and the count that rule
+gives for a config without collecting (:meth:`UpdateSchedule.planned_gradient_steps`), so a
 config that would never take a gradient step is refused before anything is built
-(:meth:`~s3rl_torchrl.trainer.config.TrainConfig.check`).
+(:meth:`~s3rl_torchrl.trainer.config.TrainConfig.check`) and the final table can name the steps
+taken. The family registry (``config.FAMILY_SCHEDULES``) maps each family to its schedule; the
+loop (trainer/loop.py) only calls the schedule's methods:
+
+- :class:`OffPolicySchedule` (SAC, DDPG families): every batch goes into one replay buffer; the
+  loop owes ``update_per_step`` gradient steps per frame of every batch that ends at or after
+  ``init_random_frames`` (FSRL learns only after the uniform-random warm-up) and leaves at least
+  ``batch_size`` transitions in the buffer; owed fractions carry over to the next batch.
+- :class:`OnPolicySchedule` (PPO family): no warm-up, the policy collects from the first frame;
+  after each collect the advantages (GAE) are computed on the whole batch, the batch replaces
+  the previous one in a rollout buffer, and ``ppo_epochs`` passes of ``ceil(frames /
+  batch_size)`` minibatches (drawn without replacement, the last one shorter) are owed.
+
+The runtime halves (what to store, what to sample) are :class:`ReplayUpdates` and
+:class:`RolloutUpdates`, built by ``builders.build_updates``.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
+
+from tensordict import TensorDictBase
 
 if TYPE_CHECKING:
+    from torchrl.data import TensorDictReplayBuffer
+
     from s3rl_torchrl.trainer.config import AlgoConfig, CollectorConfig
-
-
-def updates_owed(
-    frames: int, batch_frames: int, stored: int, collector: CollectorConfig, algo: AlgoConfig
-) -> float:
-    """Gradient steps owed for a batch of ``batch_frames`` frames that brought the run to
-    ``frames`` frames and left ``stored`` transitions in the replay buffer."""
-    if frames < collector.init_random_frames:
-        return 0.0
-    if stored < algo.batch_size:
-        return 0.0
-    return algo.update_per_step * batch_frames
 
 
 def collector_batch_frames(collector: CollectorConfig) -> int:
@@ -34,30 +40,200 @@ def collector_batch_frames(collector: CollectorConfig) -> int:
     return math.ceil(collector.frames_per_batch / collector.num_envs) * collector.num_envs
 
 
-def stored_transitions(batches: int, collector: CollectorConfig, algo: AlgoConfig) -> int:
-    """Replay-buffer length after ``batches`` batches: with n-step returns (``n_step > 1``) the
-    n-step transform holds back the last ``n_step`` frames of every env copy until the next
-    batch (torchrl's ``MultiStepTransform`` buffering); the buffer keeps ``buffer_size`` at most."""
-    steps_per_env = batches * collector_batch_frames(collector) // collector.num_envs
-    held_back = algo.n_step if algo.n_step > 1 else 0
-    return min(algo.buffer_size, collector.num_envs * max(0, steps_per_env - held_back))
+def collected_batches(collector: CollectorConfig) -> int:
+    """Batches a run collects: the last one may run past ``total_frames`` (whole batches)."""
+    return math.ceil(collector.total_frames / collector_batch_frames(collector))
+
+
+class UpdateSchedule:
+    """What an algorithm family declares: its warm-up and the gradient steps each batch owes.
+
+    Subclasses define :meth:`warmup_frames` and :meth:`steps_owed`; the plan replays the latter
+    batch by batch.
+    """
+
+    name: ClassVar[str]
+
+    def __init__(self, collector: CollectorConfig, algo: AlgoConfig) -> None:
+        self.collector, self.algo = collector, algo
+
+    def warmup_frames(self) -> int:
+        """Frames the collector draws uniformly at random before the policy acts."""
+        raise NotImplementedError
+
+    def steps_owed(self, frames: int, batch_frames: int, stored: int) -> float:
+        """Gradient steps owed for a batch of ``batch_frames`` frames that brought the run to
+        ``frames`` frames and left ``stored`` transitions in the buffer the updates sample."""
+        raise NotImplementedError
+
+    def stored_after(self, batches: int) -> int:
+        """Length of the buffer the updates sample after ``batches`` batches."""
+        raise NotImplementedError
+
+    def planned_gradient_steps(self, stop_at: int | None = None) -> int:
+        """The number of gradient steps a run of this config takes; with ``stop_at``,
+        counting stops once that many are reached."""
+        batch_frames = collector_batch_frames(self.collector)
+        pending, steps = 0.0, 0
+        for k in range(1, collected_batches(self.collector) + 1):
+            pending += self.steps_owed(k * batch_frames, batch_frames, self.stored_after(k))
+            # The loop subtracts 1.0 per step; below 2**53 that is exact, so floor gives the same.
+            whole = math.floor(pending)
+            steps += whole
+            pending -= whole
+            if stop_at is not None and steps >= stop_at:
+                break
+        return steps
+
+    def no_learning_reason(self, prefix: str) -> str:
+        """Why a config takes no gradient step (for the config error), without the fixes."""
+        raise NotImplementedError
+
+
+class OffPolicySchedule(UpdateSchedule):
+    """Replay buffer, uniform-random warm-up, ``update_per_step`` gradient steps per frame."""
+
+    name = "off_policy"
+
+    def warmup_frames(self) -> int:
+        return self.collector.init_random_frames
+
+    def steps_owed(self, frames: int, batch_frames: int, stored: int) -> float:
+        if frames < self.collector.init_random_frames:
+            return 0.0
+        if stored < self.algo.batch_size:
+            return 0.0
+        return self.algo.update_per_step * batch_frames
+
+    def stored_after(self, batches: int) -> int:
+        """Replay-buffer length after ``batches`` batches: with n-step returns (``n_step > 1``)
+        the n-step transform holds back the last ``n_step`` frames of every env copy until the
+        next batch (torchrl's ``MultiStepTransform`` buffering); the buffer keeps
+        ``buffer_size`` at most."""
+        collector, algo = self.collector, self.algo
+        steps_per_env = batches * collector_batch_frames(collector) // collector.num_envs
+        held_back = algo.n_step if algo.n_step > 1 else 0
+        return min(algo.buffer_size, collector.num_envs * max(0, steps_per_env - held_back))
+
+    def no_learning_reason(self, prefix: str) -> str:
+        return (
+            "no gradient step would happen: learning starts with the first batch "
+            f"({collector_batch_frames(self.collector)} frames) that ends at or after "
+            f"{prefix}collector.init_random_frames ({self.collector.init_random_frames}) and "
+            f"leaves at least {prefix}algo.batch_size ({self.algo.batch_size}) transitions in "
+            f"the replay buffer, then takes {prefix}algo.update_per_step "
+            f"({self.algo.update_per_step}) steps per frame"
+        )
+
+
+class OnPolicySchedule(UpdateSchedule):
+    """Collect, GAE on the batch, ``ppo_epochs`` passes of minibatches over it; no warm-up.
+
+    ``collector.init_random_frames`` and ``algo.update_per_step`` are not used: each batch is
+    learnt from by the policy that collected it, then dropped (``algo.buffer_size`` sizes the
+    FIFO of labelled states the contrastive phase and the probe sample, not a replay buffer).
+    """
+
+    name = "on_policy"
+
+    def warmup_frames(self) -> int:
+        return 0
+
+    def minibatches_per_epoch(self, batch_frames: int) -> int:
+        """``ceil(frames / batch_size)``: torchrl's ``SamplerWithoutReplacement`` keeps the
+        shorter last minibatch (``drop_last=False``)."""
+        return math.ceil(batch_frames / self.algo.batch_size)
+
+    def steps_owed(self, frames: int, batch_frames: int, stored: int) -> float:
+        return float(self.algo.ppo_epochs * self.minibatches_per_epoch(stored))
+
+    def stored_after(self, batches: int) -> int:
+        return collector_batch_frames(self.collector) if batches > 0 else 0
+
+    def no_learning_reason(self, prefix: str) -> str:  # every batch owes >= ppo_epochs steps
+        return "no gradient step would happen"
 
 
 def planned_gradient_steps(
     collector: CollectorConfig, algo: AlgoConfig, stop_at: int | None = None
 ) -> int:
-    """The number of gradient steps a run of this config takes (collector and algo settings);
-    with ``stop_at``, counting stops once that many are reached."""
-    batch_frames = collector_batch_frames(collector)
-    batches = math.ceil(collector.total_frames / batch_frames)
-    pending, steps = 0.0, 0
-    for k in range(1, batches + 1):
-        stored = stored_transitions(k, collector, algo)
-        pending += updates_owed(k * batch_frames, batch_frames, stored, collector, algo)
-        # The loop subtracts 1.0 per step; below 2**53 that is exact, so floor gives the same.
-        whole = math.floor(pending)
-        steps += whole
-        pending -= whole
-        if stop_at is not None and steps >= stop_at:
-            break
-    return steps
+    """The number of gradient steps a run of this config takes (its family's schedule)."""
+    return algo.schedule(collector).planned_gradient_steps(stop_at)
+
+
+# ------------------------------------------------------------------------------- runtime
+class ReplayUpdates:
+    """Off-policy at run time: store each batch (n-step transitions) in the replay buffer, draw
+    each gradient step's batch from it. The same buffer feeds the contrastive phase."""
+
+    def __init__(
+        self,
+        schedule: OffPolicySchedule,
+        replay_buffer: TensorDictReplayBuffer,
+        stored_keys: list,
+        nstep: Callable[[TensorDictBase], TensorDictBase | None] | None = None,
+    ) -> None:
+        self.schedule, self.replay_buffer = schedule, replay_buffer
+        self.stored_keys, self.nstep = stored_keys, nstep
+
+    def store(self, batch: TensorDictBase) -> None:
+        data = self.nstep(batch) if self.nstep is not None else batch
+        if data is not None and data.numel():
+            # Not strict: without n-step returns (n_step=1) there is no `steps_to_next_obs`.
+            self.replay_buffer.extend(data.select(*self.stored_keys, strict=False).reshape(-1))
+
+    def owed(self, frames: int, batch_frames: int) -> float:
+        return self.schedule.steps_owed(frames, batch_frames, len(self.replay_buffer))
+
+    def sample(self) -> TensorDictBase:
+        return self.replay_buffer.sample()
+
+    def buffers(self) -> dict[str, TensorDictReplayBuffer]:
+        """Extra buffers a checkpoint keeps besides ``replay_buffer`` (none)."""
+        return {}
+
+    def load(self, checkpoint_dir: Path) -> None:
+        pass
+
+
+class RolloutUpdates:
+    """On-policy at run time: each batch gets its advantages (``prepare``: GAE of the reward,
+    and of the cost for PPO-Lag) with the critics of the policy that collected it, then
+    replaces the previous batch in ``rollout`` (torchrl's ``SamplerWithoutReplacement``: each
+    pass over the batch is a new permutation). ``labelled`` (the trainer's ``replay_buffer``,
+    a FIFO of recent labelled states) gets the keys in ``labelled_keys`` of every batch: the
+    contrastive phase and the linear probe sample it (docs/representation.md)."""
+
+    ROLLOUT_DIR = "rollout_buffer"
+
+    def __init__(
+        self,
+        schedule: OnPolicySchedule,
+        rollout: TensorDictReplayBuffer,
+        prepare: Callable[[TensorDictBase], TensorDictBase],
+        rollout_keys: list,
+        labelled: TensorDictReplayBuffer,
+        labelled_keys: list,
+    ) -> None:
+        self.schedule, self.rollout, self.prepare = schedule, rollout, prepare
+        self.rollout_keys, self.labelled, self.labelled_keys = rollout_keys, labelled, labelled_keys
+
+    def store(self, batch: TensorDictBase) -> None:
+        self.labelled.extend(batch.select(*self.labelled_keys).reshape(-1))
+        batch = self.prepare(batch)  # [envs, time]: GAE runs along the last dimension
+        self.rollout.empty()
+        self.rollout.extend(batch.select(*self.rollout_keys, strict=False).reshape(-1))
+
+    def owed(self, frames: int, batch_frames: int) -> float:
+        return self.schedule.steps_owed(frames, batch_frames, len(self.rollout))
+
+    def sample(self) -> TensorDictBase:
+        return self.rollout.sample()
+
+    def buffers(self) -> dict[str, TensorDictReplayBuffer]:
+        """The rollout (its sampler's permutation included): a run stopped between two
+        minibatches resumes on the same batch and the same remaining minibatches."""
+        return {self.ROLLOUT_DIR: self.rollout}
+
+    def load(self, checkpoint_dir: Path) -> None:
+        self.rollout.loads(Path(checkpoint_dir) / self.ROLLOUT_DIR)

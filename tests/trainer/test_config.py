@@ -9,6 +9,7 @@ from omegaconf.errors import ValidationError
 from s3rl_torchrl.envs import task_names
 from s3rl_torchrl.trainer import ConfigError, TrainConfig, validate
 from s3rl_torchrl.trainer.config import ALGO_NAMES
+from s3rl_torchrl.trainer.schedule import OffPolicySchedule, OnPolicySchedule
 
 
 def test_defaults_are_quick_s3rl_on_half_cheetah(compose):
@@ -22,12 +23,29 @@ def test_defaults_are_quick_s3rl_on_half_cheetah(compose):
 def test_every_algo_and_experiment_composes(algo, experiment, compose):
     cfg = validate(compose(f"algo={algo}", f"experiment={experiment}"))
     assert cfg.algo.name == algo
-    expect_lag = algo in ("s3rl", "sac_lag", "ddpg_lag", "s3rl_ddpg_lag")
+    expect_lag = algo in ("s3rl", "sac_lag", "ddpg_lag", "s3rl_ddpg_lag", "ppo_lag", "s3rl_ppo_lag")
     assert (cfg.algo.lagrangian != "none") == expect_lag
     assert cfg.algo.contrastive == algo.startswith("s3rl")
-    assert cfg.algo.family == ("ddpg" if "ddpg" in algo else "sac")
+    family = "ddpg" if "ddpg" in algo else "ppo" if "ppo" in algo else "sac"
+    assert cfg.algo.family == family
     # DDPG steps in FSRL's order (critics, then the actor); the SAC family keeps its default.
     assert cfg.algo.update_order == ("fsrl" if "ddpg" in algo else "joint")
+    schedule = type(cfg.algo.schedule(cfg.collector))
+    assert schedule is (OnPolicySchedule if family == "ppo" else OffPolicySchedule)
+
+
+@pytest.mark.parametrize("algo", ["ppo_lag", "ppo", "s3rl_ppo_lag"])
+def test_ppo_family_has_fsrl_ppo_lag_defaults(algo, compose):
+    # fsrl/config/ppol_cfg.py: lr 5e-4 (one Adam), gamma 0.99, gae_lambda 0.95, eps_clip 0.2,
+    # vf_coef 0.25, max_grad_norm 0.5, repeat_per_collect 4, batch_size 256, rescaling.
+    a = validate(compose(f"algo={algo}")).algo
+    assert (a.actor_lr, a.critic_lr, a.gamma, a.gae_lambda, a.clip_epsilon) == (
+        5e-4, 5e-4, 0.99, 0.95, 0.2,
+    )
+    assert (a.critic_coeff, a.max_grad_norm, a.ppo_epochs, a.batch_size, a.rescaling) == (
+        0.25, 0.5, 4, 256, True,
+    )
+    assert a.cost_surrogate == "unclipped" and (a.pid.kp, a.pid.ki, a.pid.kd) == (0.05, 5e-4, 0.1)
 
 
 @pytest.mark.parametrize(
@@ -38,6 +56,21 @@ def test_every_algo_and_experiment_composes(algo, experiment, compose):
     ],
 )
 def test_ddpg_options_are_checked(overrides, match, compose):
+    with pytest.raises(ConfigError, match=match):
+        validate(compose(*overrides))
+
+
+@pytest.mark.parametrize(
+    ("overrides", "match"),
+    [
+        (("algo=ppo_lag", "algo.ppo_epochs=0"), "'algo.ppo_epochs'"),
+        (("algo=ppo_lag", "algo.gae_lambda=1.5"), "'algo.gae_lambda'"),
+        (("algo=ppo", "algo.clip_epsilon=0"), "'algo.clip_epsilon'"),
+        (("algo=ppo", "algo.max_grad_norm=0"), "'algo.max_grad_norm'"),
+        (("algo=ppo_lag", "algo.cost_surrogate=both"), "'algo.cost_surrogate'.*unclipped"),
+    ],
+)
+def test_ppo_options_are_checked(overrides, match, compose):
     with pytest.raises(ConfigError, match=match):
         validate(compose(*overrides))
 
@@ -144,7 +177,7 @@ def test_bad_types_and_unknown_keys_fail_at_composition(compose):
     with pytest.raises(ConfigCompositionException):
         compose("algo.not_a_field=1")
     with pytest.raises(ConfigCompositionException) as err:
-        compose("algo=ppo")
+        compose("algo=trpo_lag")
     assert "s3rl" in str(err.value) and "sac_lag" in str(err.value)  # lists the options
     with pytest.raises(ConfigCompositionException):
         compose("task=SafetyCheetahVelocity-v1")
@@ -214,6 +247,48 @@ def test_planned_gradient_steps_by_hand(overrides, steps, compose):
     merged = OmegaConf.merge(OmegaConf.structured(TrainConfig), compose(*overrides))
     cfg = OmegaConf.to_object(merged)
     assert planned_gradient_steps(cfg.collector, cfg.algo) == steps
+
+
+def _batch_frames(frames: int) -> tuple[str, str]:
+    return f"collector.frames_per_batch={frames}", f"collector.frames_per_epoch={frames}"
+
+
+# The on-policy schedule by hand: each batch of F frames owes ppo_epochs x ceil(F / batch_size)
+# minibatch steps, from the first batch (no warm-up, init_random_frames is not used).
+# - tiny: 6 batches of 100 frames, batch 32: 6 x 4 x ceil(100 / 32) = 6 x 4 x 4 = 96.
+# - tiny, batch_size 100: 6 x 4 x 1 = 24.
+# - quick: 40 batches of 1000 frames, batch 256: 40 x 4 x 4 = 640.
+# - tiny, 200 frames with a 200-frame warm-up and batch_size 200 (off-policy: 0 steps):
+#   2 x 4 x 1 = 8; ppo_epochs 10: 2 x 10 x 1 = 20.
+# - tiny, frames_per_batch 101 over 2 envs: torchrl collects 102 frames a batch, 6 batches for
+#   600 frames: 6 x 4 x ceil(102 / 32) = 6 x 4 x 4 = 96; frames_per_batch 130 (130 a batch,
+#   5 batches): 5 x 4 x 5 = 100.
+@pytest.mark.parametrize(
+    "overrides, steps",
+    [
+        (("experiment=tiny",), 96),
+        (("experiment=tiny", "algo.batch_size=100"), 24),
+        (("experiment=quick",), 640),
+        (("experiment=tiny", "collector.total_frames=200", "algo.batch_size=200"), 8),
+        (
+            (
+                "experiment=tiny",
+                "collector.total_frames=200",
+                "algo.batch_size=200",
+                "algo.ppo_epochs=10",
+            ),
+            20,
+        ),
+        (("experiment=tiny", *_batch_frames(101)), 96),
+        (("experiment=tiny", *_batch_frames(130)), 100),
+    ],
+)
+def test_planned_on_policy_gradient_steps_by_hand(overrides, steps, compose):
+    from s3rl_torchrl.trainer.schedule import planned_gradient_steps
+
+    cfg = validate(compose("algo=ppo_lag", "compile=false", *overrides))
+    assert planned_gradient_steps(cfg.collector, cfg.algo) == steps
+    assert cfg.algo.schedule(cfg.collector).warmup_frames() == 0
 
 
 def test_a_run_that_cannot_learn_is_refused(compose):

@@ -136,6 +136,9 @@ def test_resume_needs_the_groups_seeds(tiny_config, tmp_path):
         (["seeds=[10,20]", "algo.update_order=fsrl"], "update_order=joint"),
         (["seeds=[10,20]", "algo=ddpg_lag"], "SAC family only.*'ddpg_lag'"),
         (["seeds=[10,20]", "algo=s3rl_ddpg_lag"], "SAC family only"),
+        # On-policy PPO has no batched update: refused, naming the algos that have one.
+        (["seeds=[10,20]", "algo=ppo_lag"], r"SAC family only \(s3rl, sac_lag, .*'ppo_lag'"),
+        (["seeds=[10,20]", "algo=s3rl_ppo_lag"], "SAC family only"),
     ],
 )
 def test_bad_seeds_fail_before_training(overrides, match, tiny_config):

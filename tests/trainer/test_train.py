@@ -21,9 +21,13 @@ FINAL_EVAL_KEYS = {
 
 
 def expected_grad_steps(cfg) -> int:
-    """The schedule by hand: update_per_step per frame of every batch that ends at or after
-    init_random_frames (FSRL starts learning after the warm-up)."""
+    """The schedule by hand. Off-policy: update_per_step per frame of every batch that ends at
+    or after init_random_frames (FSRL starts learning after the warm-up). On-policy (PPO):
+    ppo_epochs passes of ceil(frames / batch_size) minibatches over every batch."""
     c = cfg.collector
+    if cfg.algo.family == "ppo":
+        batches = c.total_frames // c.frames_per_batch
+        return batches * cfg.algo.ppo_epochs * -(-c.frames_per_batch // cfg.algo.batch_size)
     ends = range(c.frames_per_batch, c.total_frames + 1, c.frames_per_batch)
     owed = sum(cfg.algo.update_per_step * c.frames_per_batch for end in ends
                if end >= c.init_random_frames)
@@ -62,15 +66,17 @@ def test_tiny_run_per_algo(algo, tiny_config, tmp_path):
     else:
         assert c.contrastive_phases == 0
     lagrangian = [float(r["lagrangian"]) for r in rows]
-    if algo in ("s3rl", "sac_lag", "ddpg_lag", "s3rl_ddpg_lag"):
+    family = cfg.algo.family
+    if cfg.algo.lagrangian != "none":
         # Swimmer episodes last 1000 steps: none ends in 600 frames, so lambda never moves.
         assert c.lagrangian_updates == 0 and lagrangian == [0.0, 0.0, 0.0]
         # The cost critic trains and its loss is logged.
-        cost_key = "train/loss_cost_value" if "ddpg" in algo else "train/loss_cost_qvalue"
-        assert all(np.isfinite(float(r[cost_key])) for r in rows)
+        cost_key = {"ddpg": "loss_cost_value", "sac": "loss_cost_qvalue", "ppo": "loss_cost_critic"}
+        assert all(np.isfinite(float(r[f"train/{cost_key[family]}"])) for r in rows)
     else:
         assert result.final_eval is not None and lagrangian == [0.0, 0.0, 0.0]
-    assert all(np.isfinite(float(r["train/loss_actor"])) for r in rows)
+    actor_key = "train/loss_objective" if family == "ppo" else "train/loss_actor"
+    assert all(np.isfinite(float(r[actor_key])) for r in rows)
 
 
 @pytest.mark.parametrize("algo", ["ddpg_lag", "ddpg"])
@@ -100,10 +106,11 @@ def test_ddpg_collects_with_noise_and_evaluates_the_actor(algo, tiny_config, tmp
     assert torch.allclose(noisy, expected, atol=1e-6)
 
 
-def test_lagrangian_updates_once_per_batch_with_finished_episodes(tiny_config, tmp_path):
+@pytest.mark.parametrize("algo", ["sac_lag", "ppo_lag"])
+def test_lagrangian_updates_once_per_batch_with_finished_episodes(algo, tiny_config, tmp_path):
     # Hopper falls within ~20 random steps: every batch ends episodes. A zero cost limit and
     # costs under a random policy make the PID output positive.
-    cfg = tiny_config("algo=sac_lag", "task=SafetyHopperVelocity-v0", "task.cost_limit=0")
+    cfg = tiny_config(f"algo={algo}", "task=SafetyHopperVelocity-v0", "task.cost_limit=0")
     seen = []
     result = train(cfg, tmp_path, on_epoch_end=lambda t, row: seen.append(row["lagrangian"]))
     batches = cfg.collector.total_frames // cfg.collector.frames_per_batch
@@ -117,7 +124,7 @@ def _counters(result):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algo", ["s3rl", "ddpg_lag"])
+@pytest.mark.parametrize("algo", ["s3rl", "ddpg_lag", "ppo_lag"])
 def test_resume_at_epoch_end_matches_uninterrupted_run(algo, tiny_config, tmp_path):
     cfg = tiny_config(f"algo={algo}", "task=SafetySwimmerVelocity-v1")
     full = train(cfg, tmp_path / "full")
