@@ -168,18 +168,22 @@ def build_agent(
             for _ in range(count)
         ]
 
-    constrained = algo.lagrangian != "none"
-    prepare = None
-    if algo.family == "ppo":
-        # The paper's stochastic actor (the policy encoder the contrastive phase trains) and
-        # one state-value network per signal (FSRL's PPO-Lag).
-        actor = build_s3rl_actor(
+    def stochastic_actor():
+        """The paper's policy encoder + tanh-Gaussian head (SAC and PPO families)."""
+        return build_s3rl_actor(
             observation_dim,
             action_spec,
             hidden=tuple(net.actor_hidden),
             log_std_bounds=(net.log_std_min, net.log_std_max),
             activation=activation,
         )
+
+    constrained = algo.lagrangian != "none"
+    prepare = None
+    if algo.family == "ppo":
+        # The paper's stochastic actor (the policy encoder the contrastive phase trains) and
+        # one state-value network per signal (FSRL's PPO-Lag).
+        actor = stochastic_actor()
         policy = actor
         hidden = tuple(net.critic_hidden)
         value = build_value_network(observation_dim, hidden, activation_class=activation)
@@ -249,13 +253,7 @@ def build_agent(
         if constrained:
             log_keys += ("loss_cost_value", "cost_q")
     else:
-        actor = build_s3rl_actor(
-            observation_dim,
-            action_spec,
-            hidden=tuple(net.actor_hidden),
-            log_std_bounds=(net.log_std_min, net.log_std_max),
-            activation=activation,
-        )
+        actor = stochastic_actor()
         policy = actor
         num_qvalue_nets = 2  # double critics (paper, FSRL)
         qvalue = critics(build_qvalue_network, num_qvalue_nets)
