@@ -58,6 +58,18 @@ def _ordered(groups: Sequence[RunGroup], reference: str) -> list[RunGroup]:
     return sorted(groups, key=lambda g: (g.algo != reference, g.label))
 
 
+def _frames_formatter():
+    """Tick labels 200k, 1M, ... that do not run into each other on a 1M-frame axis."""
+    from matplotlib.ticker import FuncFormatter
+
+    def label(x: float, _pos) -> str:
+        if abs(x) >= 1e6:
+            return f"{x / 1e6:g}M"
+        return f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"
+
+    return FuncFormatter(label)
+
+
 def learning_curves(
     by_task: Mapping[str, Sequence[RunGroup]], out_dir: Path, reference: str = "s3rl"
 ) -> list[Path]:
@@ -80,7 +92,9 @@ def learning_curves(
                 colour = colours[group.label]
                 seeds = len(group.runs)
                 ax.plot(frames, mean, color=colour, label=f"{group.label} ({seeds} seeds)")
-                ax.fill_between(frames, mean - std, mean + std, color=colour, alpha=0.2, lw=0)
+                # Costs are never negative: the band stops at 0 rather than suggest it.
+                low = np.maximum(mean - std, 0.0) if column == "eval/cost" else mean - std
+                ax.fill_between(frames, low, mean + std, color=colour, alpha=0.2, lw=0)
         limit = by_task[task][0].cost_limit
         if not math.isnan(limit):
             axes[1, col].axhline(limit, color="black", ls="--", lw=1, label=f"cost limit {limit:g}")
@@ -88,6 +102,7 @@ def learning_curves(
         axes[0, col].set_ylabel("evaluation reward")
         axes[1, col].set_ylabel("evaluation cost")
         axes[1, col].set_xlabel("environment steps")
+        axes[1, col].xaxis.set_major_formatter(_frames_formatter())
         axes[1, col].legend(fontsize=8)
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)

@@ -197,3 +197,12 @@ def test_report_with_checkpoint_rollouts(tiny_runs, tmp_path):
     for row in rows:
         safe, unsafe = (int(x) for x in row.split("|")[4].split("/"))
         assert safe + unsafe == 100
+
+
+def test_frame_ticks_are_short_enough_not_to_overlap():
+    from s3rl_torchrl.report.figures import _frames_formatter
+
+    label = _frames_formatter()
+    assert [label(x, None) for x in (0, 500, 25_000, 125_000, 1_000_000, 2_500_000)] == [
+        "0", "500", "25k", "125k", "1M", "2.5M",
+    ]
