@@ -17,7 +17,7 @@ STAMP := $(VENV)/.installed-$(EXTRAS)
 # pytest-xdist workers for make test / test-fast (0: one process).
 WORKERS ?= 2
 
-.PHONY: setup train test test-fast lint bench clean
+.PHONY: setup train test test-fast lint bench report clean
 
 $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,13 @@ test-fast: $(STAMP) lint
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_throughput.py
+
+# Rebuild the reproduction's report (docs/reproduction/) from the small result files kept in
+# results/reproduction/ (config.json, metrics.csv, final_eval.json per run; docs/results.md).
+report: $(STAMP)
+	$(BIN)/s3rl-report results/reproduction --no-embeddings --out docs/reproduction
+	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
+		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache

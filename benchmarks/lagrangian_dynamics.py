@@ -166,6 +166,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
     summary = {
         "run_dir": str(run_dir),
         "task": config["task"]["name"],
+        "algo": config["algo"]["name"],
         "setting": setting_name(config),
         "seed": config["seed"],
         "cost_limit": limit,
@@ -192,13 +193,14 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
 
 
 def aggregate(runs: list[dict]) -> list[dict]:
-    """Mean and standard deviation over seeds, per (task, setting)."""
-    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    """Mean and standard deviation over seeds, per (task, algo, setting)."""
+    groups: dict[tuple[str, str, str], list[dict]] = defaultdict(list)
     for run in runs:
-        groups[run["task"], run["setting"]].append(run)
+        groups[run["task"], run["algo"], run["setting"]].append(run)
     table = []
-    for (task, setting), members in sorted(groups.items()):
-        row = {"task": task, "setting": setting, "seeds": sorted(m["seed"] for m in members)}
+    for (task, algo, setting), members in sorted(groups.items()):
+        row = {"task": task, "algo": algo, "setting": setting}
+        row["seeds"] = sorted(m["seed"] for m in members)
         row["frames"] = min(m["frames"] for m in members)
         for key in METRICS:
             values = [m[key] for m in members]
@@ -210,13 +212,14 @@ def aggregate(runs: list[dict]) -> list[dict]:
 
 def markdown(table: list[dict]) -> str:
     head = (
-        "| task | setting | seeds | frames | eval cost > d | train cost > d | mean abs dlambda "
-        "(epoch) | lambda | eval reward | eval cost |\n|---|---|---|---|---|---|---|---|---|---|"
+        "| task | algo | setting | seeds | frames | eval cost > d | train cost > d | mean abs "
+        "dlambda (epoch) | lambda | eval reward | eval cost |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|"
     )
     lines = [head]
     for r in table:
         lines.append(
-            f"| {r['task']} | {r['setting']} | {len(r['seeds'])} | {r['frames']} | "
+            f"| {r['task']} | {r['algo']} | {r['setting']} | {len(r['seeds'])} | {r['frames']} | "
             f"{r['eval_cost_over_limit']:.2f} | {r['train_cost_over_limit']:.2f} | "
             f"{r['mean_abs_dlambda_epoch']:.3g} | {r['lambda_mean']:.3g} | "
             f"{r['eval_reward']:.0f} | {r['eval_cost']:.1f} |"
@@ -228,6 +231,8 @@ def copy_metrics(runs: list[dict], csv_dir: Path) -> None:
     for run in runs:
         slug = re.sub(r"[^A-Za-z0-9.]+", "_", run["setting"]).strip("_")
         target = csv_dir / run["task"] / slug / f"seed{run['seed']}.csv"
+        if run["algo"] != "sac_lag":  # the launcher's algo keeps its original layout
+            target = csv_dir / run["task"] / run["algo"] / slug / f"seed{run['seed']}.csv"
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(Path(run["run_dir"]) / "metrics.csv", target)
 
@@ -244,7 +249,8 @@ def plot(runs: list[dict], path: Path) -> None:
         rows = read_rows(Path(run["run_dir"]) / "metrics.csv")
         frames = [_float(r["frames"]) / 1e3 for r in rows]
         axes[0, j].plot(frames, [_float(r["lagrangian"]) for r in rows], "k.-")
-        title = f"{run['task'].replace('Safety', '')} seed {run['seed']}\n{run['setting']}"
+        title = f"{run['task'].replace('Safety', '')} {run['algo']} seed {run['seed']}"
+        title += f"\n{run['setting']}"
         axes[0, j].set_title(textwrap.fill(title.replace(",", ", "), 48), fontsize=7)
         axes[0, j].set_ylabel("lambda after the update")
         axes[1, j].plot(frames, [_float(r["eval/cost"]) for r in rows], "r.-", label="eval")

@@ -24,6 +24,7 @@ def fake_run(root: Path, seed: int, rows: list[list[float]], updates, final=None
     config = {
         "task": {"name": "SafetyHalfCheetahVelocity-v1", "cost_limit": 10.0},
         "algo": {
+            "name": "sac_lag",
             "lagrangian": "pid",
             "lagrangian_lr": 0.005,
             "pid": {
@@ -166,3 +167,23 @@ def test_plant_mode_builds_the_configured_controllers(tmp_path):
     assert rows["learned_lr0.05"]["first_lambdas_seed0"][0] == pytest.approx(0.05, abs=1e-6)
     # Second half (updates 3, 4): J = 900 then 0 for FSRL, over the limit once in two.
     assert rows["fsrl"]["cost_over_limit"] == 0.5
+
+
+def test_algos_with_the_same_controller_are_summarised_apart(tmp_path):
+    rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
+    sac_lag = fake_run(tmp_path / "sac_lag", 10, rows, [(20000, 0.0), (40000, 9.0)])
+    s3rl = fake_run(tmp_path / "s3rl", 10, rows, [(20000, 0.0), (40000, 9.0)])
+    config = json.loads((s3rl / "config.json").read_text())
+    config["algo"]["name"] = "s3rl"
+    (s3rl / "config.json").write_text(json.dumps(config))
+    report = ld.summarise([sac_lag, s3rl], None, tmp_path / "csv", None)
+    assert [(r["algo"], r["seeds"]) for r in report["settings"]] == [
+        ("s3rl", [10]),
+        ("sac_lag", [10]),
+    ]
+    task_dir = tmp_path / "csv" / "SafetyHalfCheetahVelocity-v1"
+    copies = sorted(p.relative_to(task_dir).as_posix() for p in task_dir.rglob("*.csv"))
+    assert copies == [
+        "pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
+        "s3rl/pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
+    ]
