@@ -96,21 +96,25 @@ def _table1(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     return _table(header, rows, "llrrrrrrrr")
 
 
-def _differences(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+def _differences(
+    by_task: dict[str, list[RunGroup]], reference: str, pairs: Sequence[tuple[str, str]] = ()
+) -> list[str]:
     rows = []
     for task, groups in by_task.items():
-        refs = [g for g in groups if g.algo == reference and g.finished]
-        for ref in refs:
-            for base in groups:
-                if base.algo == reference or not base.finished:
-                    continue
-                for metric in ("reward", "cost"):
-                    paired, welch = compare_groups(ref, base, metric)
-                    rows.append([
-                        task, metric, f"{ref.label} − {base.label}",
-                        _num(paired.difference), _test_cell(paired),
-                        _num(welch.difference), _test_cell(welch),
-                    ])
+        finished = [g for g in groups if g.finished]
+        compared = [(ref, base) for ref in finished if ref.algo == reference
+                    for base in finished if base.algo != reference]
+        # --compare A:B adds A minus B (e.g. s3rl_ddpg_lag:ddpg_lag) to the reference's rows.
+        compared += [(a, b) for first, second in pairs for a in finished if a.algo == first
+                     for b in finished if b.algo == second and a.algo != reference]
+        for ref, base in compared:
+            for metric in ("reward", "cost"):
+                paired, welch = compare_groups(ref, base, metric)
+                rows.append([
+                    task, metric, f"{ref.label} − {base.label}",
+                    _num(paired.difference), _test_cell(paired),
+                    _num(welch.difference), _test_cell(welch),
+                ])
     if not rows:
         return [f"No task has finished runs of both {reference} and another algo."]
     header = ["task", "metric", "difference", "over seeds", "paired t-test",
@@ -218,6 +222,7 @@ def build_report(
     out: str | Path | None = None,
     reference: str = "s3rl",
     group_by: Sequence[str] = (),
+    pairs: Sequence[tuple[str, str]] = (),
     embeddings: bool = True,
     embedding_episodes: int = 2,
     tsne_states: int = 1000,
@@ -230,6 +235,7 @@ def build_report(
         out: the report directory (default ``<root>/report``).
         reference: the algo compared against every other one (S3RL).
         group_by: config keys (dotted) that split runs of one task and algo into groups.
+        pairs: further (algo, algo) pairs whose difference is tested, first minus second.
         embeddings: roll out checkpoints for Figure 4 and the probe table (slower: a few
             seconds per checkpoint plus t-SNE).
         embedding_episodes: evaluation env copies rolled out per checkpoint.
@@ -294,7 +300,7 @@ def build_report(
         "t-test over the pooled evaluation episodes; 95% confidence intervals of the "
         "difference (scipy.stats `ttest_rel` / `ttest_ind(equal_var=False)`).",
         "",
-        *_differences(by_task, reference),
+        *_differences(by_task, reference, pairs),
         "",
         "## Comparison with the paper",
         "",

@@ -17,6 +17,13 @@ def _positive(text: str) -> int:
     return value
 
 
+def _pair(text: str) -> tuple[str, str]:
+    first, sep, second = text.partition(":")
+    if not sep or not first or not second:
+        raise argparse.ArgumentTypeError(f"expected two algos as A:B, got {text!r}")
+    return first, second
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="s3rl-report",
@@ -30,6 +37,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", default=None, help="report directory (default: RUNS/report)")
     parser.add_argument("--reference", default="s3rl",
                         help="the algo compared with every other one (default: s3rl)")
+    parser.add_argument("--compare", action="append", default=[], metavar="A:B",
+                        type=_pair,
+                        help="also test algo A minus algo B (e.g. s3rl_ddpg_lag:ddpg_lag); "
+                             "repeatable")
     parser.add_argument("--group-by", action="append", default=[], metavar="KEY",
                         help="a config key (dotted, e.g. algo.pid.kp) that splits the runs of "
                              "one task and algo into separate groups; repeatable")
@@ -67,6 +78,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.out,
             reference=args.reference,
             group_by=args.group_by,
+            pairs=args.compare,
             embeddings=not args.no_embeddings,
             embedding_episodes=args.embedding_episodes,
             tsne_states=args.tsne_states,

@@ -199,6 +199,26 @@ def test_report_with_checkpoint_rollouts(tiny_runs, tmp_path):
         assert safe + unsafe == 100
 
 
+def test_compare_adds_pairs_beside_the_reference(tmp_path, make_run, capsys):
+    rewards = _sweep(tmp_path, make_run)
+    assert main([str(tmp_path / "sweep"), "--out", str(tmp_path / "rep"), "--no-embeddings",
+                 "--compare", "sac_lag:s3rl", "--compare", "s3rl:sac_lag"]) == 0
+    lines = (tmp_path / "rep" / "report.md").read_text().splitlines()
+    reverse = next(line for line in lines if "| reward | sac_lag − s3rl |" in line)
+    # The reverse pair: minus the reference's difference, same paired test (scipy, by hand).
+    paired = stats.ttest_rel([np.mean(rewards["sac_lag", s]) for s in (1, 2, 3)],
+                             [np.mean(rewards["s3rl", s]) for s in (1, 2, 3)])
+    ci = paired.confidence_interval(0.95)
+    assert f"| -6.00 | p = {paired.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] (3 pairs) |" in (
+        reverse
+    )
+    # A pair the reference already covers is not repeated.
+    assert sum("| reward | s3rl − sac_lag |" in line for line in lines) == 1
+    with pytest.raises(SystemExit):
+        main([str(tmp_path / "sweep"), "--compare", "s3rl"])
+    assert "expected two algos as A:B" in capsys.readouterr().err
+
+
 def test_frame_ticks_are_short_enough_not_to_overlap():
     from s3rl_torchrl.report.figures import _frames_formatter
 
