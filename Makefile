@@ -51,12 +51,15 @@ test-fast: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_throughput.py
 
-# Rebuild the reproduction's report (docs/reproduction/) from the small result files kept in
-# results/reproduction/ (config.json, metrics.csv, final_eval.json per run; docs/results.md).
+# Rebuild the reports in docs/ from the small result files kept in results/ (config.json,
+# metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
+# Table 2 comparison of algorithms.
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --no-embeddings --out docs/reproduction
 	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
+	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
+		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache
