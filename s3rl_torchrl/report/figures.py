@@ -29,6 +29,9 @@ def _pyplot():
             "s3rl-report draws its figures with matplotlib: pip install -e \".[plots]\""
         ) from err
     matplotlib.use("Agg")
+    # Rebuilding a report from the same runs gives the same SVG bytes (ids from a fixed salt,
+    # no date; _save), so that committed figures change only when the results do.
+    matplotlib.rcParams["svg.hashsalt"] = "s3rl-report"
     import matplotlib.pyplot as plt
 
     return plt
@@ -39,18 +42,27 @@ def _save(fig, out_dir: Path, name: str) -> list[Path]:
     paths = []
     for fmt in FORMATS:
         path = out_dir / f"{name}.{fmt}"
-        fig.savefig(path, dpi=150, bbox_inches="tight")
+        metadata = {"Date": None} if fmt == "svg" else None
+        fig.savefig(path, dpi=150, bbox_inches="tight", metadata=metadata)
         paths.append(path)
     fig.clf()
     return paths
 
 
+# The reference in blue, the others in tab10's remaining colours, then tab20's light shades:
+# 19 distinct colours before any repeats (a Table-2 sweep has ten algos).
+PALETTE = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    "#bcbd22", "#17becf", "#ffbb78", "#98df8a", "#ff9896", "#c5b0d5", "#c49c94", "#f7b6d2",
+    "#c7c7c7", "#dbdb8d", "#9edae5",
+]
+
+
 def _colours(labels: Sequence[str], reference: str) -> dict[str, str]:
-    """The reference algo in blue everywhere, the others in the following tab10 colours."""
-    palette = ["#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22"]
+    """The reference algo in blue everywhere, every other label its own colour (PALETTE)."""
     others = [label for label in labels if label != reference]
-    colours = {reference: palette[0]}
-    colours.update({label: palette[1 + i % (len(palette) - 1)] for i, label in enumerate(others)})
+    colours = {reference: PALETTE[0]}
+    colours.update({label: PALETTE[1 + i % (len(PALETTE) - 1)] for i, label in enumerate(others)})
     return colours
 
 
@@ -103,7 +115,10 @@ def learning_curves(
         axes[1, col].set_ylabel("evaluation cost")
         axes[1, col].set_xlabel("environment steps")
         axes[1, col].xaxis.set_major_formatter(_frames_formatter())
-        axes[1, col].legend(fontsize=8)
+        if len(labels) <= 4:
+            axes[1, col].legend(fontsize=8)
+        elif col == len(tasks) - 1:  # many algos: one legend beside the plots, not over them
+            axes[1, col].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
     fig.suptitle("Learning curves (deterministic evaluation; mean ± std over seeds)")
