@@ -89,10 +89,15 @@ def learning_curves(
     task; mean over seeds, shaded +- std; the task's cost limit as a dashed line."""
     plt = _pyplot()
     tasks = list(by_task)
-    fig, axes = plt.subplots(
-        2, len(tasks), figsize=(4.2 * len(tasks), 6.4), squeeze=False, sharex="col"
-    )
     labels = sorted({g.label for groups in by_task.values() for g in groups})
+    legend_width = 2.6 if len(labels) > 4 else 0.0  # the legend beside the last column
+    fig, axes = plt.subplots(
+        2,
+        len(tasks),
+        figsize=(6.0 * len(tasks) + legend_width, 6.4),
+        squeeze=False,
+        sharex="col",
+    )
     colours = _colours(labels, reference)
     for col, task in enumerate(tasks):
         for group in _ordered(by_task[task], reference):
