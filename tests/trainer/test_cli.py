@@ -63,8 +63,9 @@ def test_bad_override_fails_before_training(tmp_path):
     assert out.returncode == 2
     assert "Invalid value -2.0 for 'algo.update_per_step'" in out.stderr
     assert not (tmp_path / "r" / "metrics.csv").exists()
-    out = run("s3rl-train", *TINY, "algo=ppo", cwd=tmp_path)
+    out = run("s3rl-train", *TINY, "algo=trpo_lag", cwd=tmp_path)
     assert out.returncode != 0 and "Available options in 'algo'" in out.stderr
+    assert "ppo_lag" in out.stderr and "s3rl_ddpg_lag" in out.stderr
 
 
 def test_eval_rejects_a_corrupt_checkpoint(tmp_path):
