@@ -138,25 +138,19 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     for k in range(max(ks)):
         seed_everything(k)
         env, _ = build_envs(cfg)
-        agents.append(build_agent(cfg, env, build_replay_buffer(cfg.algo)))
+        # Agent 0 is the baseline: built as the single-seed Trainer builds it, so its
+        # ``update`` is the recipe's own joint step (compiled like the recipe's when compiled).
+        compile_fn = compile_loss if compiled and k == 0 else None
+        agents.append(build_agent(cfg, env, build_replay_buffer(cfg.algo), compile_fn))
     data = env.rollout(cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
     batch = data[: cfg.algo.batch_size]
     action_dim = env.action_spec.shape[-1]
     wrap = compile_loss if compiled else None
 
     single = agents[0]
-    single_forward = compile_loss(single.loss) if compiled else single.loss
-    optimizers = [o for o in single.optimizers if o is not None]
 
     def single_step(rows=batch):
-        losses = single_forward(rows)
-        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
-        for optimizer in optimizers:
-            optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        for optimizer in optimizers:
-            optimizer.step()
-        single.target_updater.step()
+        single.update(rows)
 
     cases = {"single-seed step": single_step}
     # A lower bound for K agents in one step: ONE agent on K x 256 rows does the FLOPs of K
