@@ -29,7 +29,8 @@ Per run, over the second half of training (epochs whose frame count is above hal
 one): the fraction of epochs whose evaluation cost and whose training-episode cost exceed the
 limit, the mean |delta lambda| between consecutive epochs and, when the run kept torchrl's CSV
 log (``logger=csv``, the default), between consecutive lambda updates; the mean evaluation and
-training reward and cost; the final evaluation if there is one. Runs are grouped by task and
+training reward and cost; the lag-1 autocorrelation of the training cost (what the controller
+is fed; about -1 in a period-2 cycle); the final evaluation if there is one. Runs are grouped by task and
 controller setting (read from each run's ``config.json``) and the means and standard deviations
 over seeds written to ``--out``. ``--csv-dir`` copies each run's ``metrics.csv`` (a few kB)
 there as ``<task>/<setting>/seed<seed>.csv`` (the setting's name with ``_`` for punctuation).
@@ -84,6 +85,7 @@ METRICS = (
     "eval_cost",
     "train_reward",
     "train_cost",
+    "train_cost_autocorr",
     "final_reward",
     "final_cost",
 )
@@ -107,6 +109,21 @@ def _std(values: list[float]) -> float:
         return math.nan
     m = sum(values) / len(values)
     return math.sqrt(sum((v - m) ** 2 for v in values) / (len(values) - 1))
+
+
+def lag1_autocorrelation(values: list[float]) -> float:
+    """Lag-1 autocorrelation of a series (the usual ACF estimate: deviations from the mean of
+    the series, over its variance), from consecutive pairs that are both numbers. A period-2
+    cycle (high, low, high, ...) gives about -1; a settled or slowly drifting series >= 0."""
+    present = [v for v in values if not math.isnan(v)]
+    if len(present) < 3:
+        return math.nan
+    mean = sum(present) / len(present)
+    variance = sum((v - mean) ** 2 for v in present)
+    if variance == 0:
+        return math.nan
+    pairs = [(a, b) for a, b in zip(values, values[1:]) if not (math.isnan(a) or math.isnan(b))]
+    return sum((a - mean) * (b - mean) for a, b in pairs) / variance
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
@@ -181,6 +198,8 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "eval_cost": _mean(col["eval/cost"]),
         "train_reward": _mean(col["train/reward"]),
         "train_cost": _mean(col["train/cost"]),
+        # The controller's input from one collect to the next: about -1 in the period-2 cycle.
+        "train_cost_autocorr": lag1_autocorrelation(col["train/cost"]),
         "final_reward": math.nan,
         "final_cost": math.nan,
     }
@@ -213,8 +232,8 @@ def aggregate(runs: list[dict]) -> list[dict]:
 def markdown(table: list[dict]) -> str:
     head = (
         "| task | algo | setting | seeds | frames | eval cost > d | train cost > d | mean abs "
-        "dlambda (epoch) | lambda | eval reward | eval cost |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|"
+        "dlambda (epoch) | lambda | eval reward | eval cost | train cost lag-1 autocorr |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|"
     )
     lines = [head]
     for r in table:
@@ -222,7 +241,7 @@ def markdown(table: list[dict]) -> str:
             f"| {r['task']} | {r['algo']} | {r['setting']} | {len(r['seeds'])} | {r['frames']} | "
             f"{r['eval_cost_over_limit']:.2f} | {r['train_cost_over_limit']:.2f} | "
             f"{r['mean_abs_dlambda_epoch']:.3g} | {r['lambda_mean']:.3g} | "
-            f"{r['eval_reward']:.0f} | {r['eval_cost']:.1f} |"
+            f"{r['eval_reward']:.0f} | {r['eval_cost']:.1f} | {r['train_cost_autocorr']:.2f} |"
         )
     return "\n".join(lines)
 

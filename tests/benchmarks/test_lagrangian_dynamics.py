@@ -78,6 +78,8 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert s["eval_reward"] == pytest.approx(1300.0)
     assert s["eval_cost"] == pytest.approx(905 / 3)
     assert s["train_cost"] == pytest.approx(35 / 3)
+    # Deviations from the mean 35/3: 25/3, 10/3, -35/3; pairs (25/3)(10/3) + (10/3)(-35/3).
+    assert s["train_cost_autocorr"] == pytest.approx((250 - 350) / (625 + 100 + 1225))
     assert (s["final_reward"], s["final_cost"]) == (2500.0, 3.0)
 
     # A second seed of the same setting: every late eval cost over the limit, no final eval.
@@ -92,6 +94,18 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
     saved = json.loads((tmp_path / "s.json").read_text())
     assert saved["settings"][0]["seeds"] == [10, 20] and len(saved["runs"]) == 2
+
+
+def test_lag1_autocorrelation_by_hand():
+    nan = float("nan")
+    # A period-2 cycle: deviations -50, 50, -50, 50, three pairs of -2500 over 4 x 2500.
+    assert ld.lag1_autocorrelation([0.0, 100.0, 0.0, 100.0]) == pytest.approx(-0.75)
+    # A ramp: mean 2, deviations -2..2: pairs 2 + 0 + 0 + 2 = 4 over 10.
+    assert ld.lag1_autocorrelation([0.0, 1.0, 2.0, 3.0, 4.0]) == pytest.approx(0.4)
+    # Epochs without a training episode (NaN) break their pairs, not the series' mean.
+    assert ld.lag1_autocorrelation([0.0, 100.0, nan, 0.0, 100.0]) == pytest.approx(-0.5)
+    assert math.isnan(ld.lag1_autocorrelation([5.0, 5.0, 5.0]))  # no variance
+    assert math.isnan(ld.lag1_autocorrelation([1.0, nan, 2.0]))  # too short
 
 
 def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
