@@ -90,7 +90,8 @@ def learning_curves(
     plt = _pyplot()
     tasks = list(by_task)
     labels = sorted({g.label for groups in by_task.values() for g in groups})
-    legend_width = 2.6 if len(labels) > 4 else 0.0  # the legend beside the last column
+    legend_beside = len(labels) > 4  # many algos: one legend beside the plots, not over them
+    legend_width = 2.6 if legend_beside else 0.0
     fig, axes = plt.subplots(
         2,
         len(tasks),
@@ -120,9 +121,9 @@ def learning_curves(
         axes[1, col].set_ylabel("evaluation cost")
         axes[1, col].set_xlabel("environment steps")
         axes[1, col].xaxis.set_major_formatter(_frames_formatter())
-        if len(labels) <= 4:
+        if not legend_beside:
             axes[1, col].legend(fontsize=8)
-        elif col == len(tasks) - 1:  # many algos: one legend beside the plots, not over them
+        elif col == len(tasks) - 1:
             axes[1, col].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0))
         for ax in axes[:, col]:
             ax.grid(alpha=0.3)
