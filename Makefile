@@ -55,7 +55,7 @@ bench: $(STAMP)
 # metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
 # Table 2 comparison of algorithms.
 report: $(STAMP)
-	$(BIN)/s3rl-report results/reproduction --no-embeddings --out docs/reproduction
+	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
 	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \

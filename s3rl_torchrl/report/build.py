@@ -7,12 +7,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
-from s3rl_torchrl.report.probe import ProbeResult, linear_probe
 from s3rl_torchrl.report.runs import (
     RUN_SPECIFIC_KEYS,
+    Run,
     RunGroup,
     config_differences,
     find_runs,
@@ -20,7 +18,7 @@ from s3rl_torchrl.report.runs import (
 )
 from s3rl_torchrl.report.stats import MeanStd, TestResult, compare_groups, summarize
 
-__all__ = ["build_report", "Report"]
+__all__ = ["build_report", "export_embedding_panels", "Report"]
 
 REPORT_FILE = "report.md"
 OVER_LIMIT = "⚠"
@@ -187,34 +185,77 @@ def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:
     return MeanStd.of(acc, ddof=1), MeanStd.of(auc, ddof=1)
 
 
-def _embedding_panels(
-    by_task: dict[str, list[RunGroup]], reference: str, episodes: int, notes: list[str]
-) -> tuple[dict, list[list[str]]]:
-    """Rollouts of one checkpoint per group (the lowest finished seed), embedded and probed."""
-    from s3rl_torchrl.report.embeddings import rollout_embeddings
+def _figure4_run(group: RunGroup) -> tuple[Run | None, str]:
+    """The run Figure 4 shows for ``group`` and where its panel comes from: the lowest finished
+    seed with a checkpoint to roll out, else with a stored panel (an exported tree)."""
+    from s3rl_torchrl.report.embeddings import PANEL_FILES
 
-    panels: dict[str, dict[str, tuple[np.ndarray, np.ndarray, ProbeResult]]] = {}
+    for run in group.finished:
+        if run.checkpoint is not None:
+            return run, "checkpoint"
+    for run in group.finished:
+        if all((run.path / name).is_file() for name in PANEL_FILES):
+            return run, "stored"
+    return None, ""
+
+
+def _embedding_panels(
+    by_task: dict[str, list[RunGroup]],
+    reference: str,
+    episodes: int,
+    tsne_states: int,
+    notes: list[str],
+) -> tuple[dict, list[list[str]]]:
+    """One panel per group: a checkpoint rolled out, embedded, probed and t-SNE'd, or the panel
+    stored beside an exported run."""
+    from s3rl_torchrl.report.embeddings import embedding_panel, load_panel
+
+    panels: dict[str, dict] = {}
     rows = []
     for task, groups in by_task.items():
         for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
-            run = next((r for r in group.finished if r.checkpoint is not None), None)
-            train_acc, train_auc = _training_probe(group)
+            run, source = _figure4_run(group)
             if run is None:
                 notes.append(f"Figure 4: no finished run of {task} / {group.label} has a "
-                             "checkpoint (checkpoints/latest); left out.")
+                             "checkpoint (checkpoints/latest) or a stored panel "
+                             "(figure4_states.csv); left out.")
                 continue
-            max_steps = run.config.get("eval", {}).get("max_steps")  # None: the task's length
-            data = rollout_embeddings(run.checkpoint, episodes=episodes, max_steps=max_steps)
-            probe = linear_probe(data.embeddings, data.safe, seed=0)
-            panels.setdefault(task, {})[f"{group.label} (seed {run.seed})"] = (
-                data.embeddings, data.safe, probe,
-            )
+            if source == "checkpoint":
+                max_steps = run.config.get("eval", {}).get("max_steps")  # None: task's length
+                panel = embedding_panel(run.checkpoint, episodes, max_steps, tsne_states)
+            else:
+                panel = load_panel(run.path)
+            panels.setdefault(task, {})[f"{group.label} (seed {run.seed})"] = panel
+            probe = panel.probe
+            train_acc, train_auc = _training_probe(group)
             rows.append([
-                task, group.label, str(run.seed), f"{probe.n_safe} / {probe.n_unsafe}",
+                task, group.label, str(run.seed), str(panel.episodes),
+                f"{probe.n_safe} / {probe.n_unsafe}",
                 f"{_num(probe.accuracy)} ({_num(probe.chance)})", _num(probe.auc),
                 _ms(train_acc), _ms(train_auc),
             ])
     return panels, rows
+
+
+def export_embedding_panels(
+    root: str | Path, dest: str | Path, episodes: int = 2, tsne_states: int = 1000
+) -> list[Path]:
+    """Store Figure 4's panel of each group below ``root`` beside its copy below ``dest`` (as
+    ``export_runs`` laid it out), so that ``s3rl-report DEST`` draws Figure 4 without the
+    checkpoints. Returns the run directories that got one."""
+    from s3rl_torchrl.report.embeddings import embedding_panel, save_panel
+
+    root, dest = Path(root), Path(dest)
+    stored = []
+    for group in group_runs(find_runs(root)):
+        run, source = _figure4_run(group)
+        if source != "checkpoint":
+            continue  # no checkpoint: keep whatever the tree already holds
+        max_steps = run.config.get("eval", {}).get("max_steps")
+        target = dest / run.path.relative_to(root)
+        save_panel(embedding_panel(run.checkpoint, episodes, max_steps, tsne_states), target)
+        stored.append(target)
+    return stored
 
 
 def build_report(
@@ -236,8 +277,9 @@ def build_report(
         reference: the algo compared against every other one (S3RL).
         group_by: config keys (dotted) that split runs of one task and algo into groups.
         pairs: further (algo, algo) pairs whose difference is tested, first minus second.
-        embeddings: roll out checkpoints for Figure 4 and the probe table (slower: a few
-            seconds per checkpoint plus t-SNE).
+        embeddings: draw Figure 4 and the probe table, from each group's checkpoint rolled
+            out (a few seconds per checkpoint plus t-SNE) or, without one, from the panel
+            ``--export-runs`` stored.
         embedding_episodes: evaluation env copies rolled out per checkpoint.
         tsne_states: at most this many states per t-SNE panel.
         command: the command line shown in the report.
@@ -339,30 +381,33 @@ def build_report(
 
     lines += ["## Figure 4: policy-encoder embeddings and linear probe", ""]
     if embeddings and finished:
-        panels, rows = _embedding_panels(by_task, reference, embedding_episodes, report.notes)
+        panels, rows = _embedding_panels(by_task, reference, embedding_episodes, tsne_states,
+                                         report.notes)
         if panels:
-            report.figures += figures.embedding_tsne(panels, out, max_states=tsne_states)
+            report.figures += figures.embedding_tsne(panels, out)
             lines += [
-                f"States of {embedding_episodes} deterministic evaluation rollouts of one "
-                "checkpoint per algo (`checkpoints/latest` of the lowest finished seed), "
-                "embedded by the policy encoder and coloured by their label (safe: the step "
-                f"from that state costs nothing; t-SNE of at most {tsne_states} of them, "
-                "drawn with a fixed seed). Probe (on all of them): a logistic regression "
-                "predicting the "
-                "label from the embedding, accuracy (chance: majority class) and ROC AUC on a "
-                "held-out 30%. *training*: the `probe/accuracy` and `probe/auc` columns of "
-                "`metrics.csv` at the last epoch (class-balanced replay-buffer sample), mean ± "
-                "std over finished seeds.",
+                "States of deterministic evaluation rollouts of one checkpoint per algo "
+                "(`checkpoints/latest` of the lowest finished seed; *rollouts*: env copies, "
+                "each the task's episode length or `eval.max_steps`), embedded by the policy "
+                "encoder and coloured by their label (safe: the step from that state costs "
+                f"nothing; t-SNE of at most {tsne_states} of them, drawn with a fixed seed). "
+                "An exported results tree (`--export-runs`) keeps each panel as "
+                "`figure4_states.csv` / `figure4_probe.json` beside the run, drawn here when "
+                "the checkpoint is gone. Probe (on all of them): a logistic regression "
+                "predicting the label from the embedding, accuracy (chance: majority class) "
+                "and ROC AUC on a held-out 30%. *training*: the `probe/accuracy` and "
+                "`probe/auc` columns of `metrics.csv` at the last epoch (class-balanced "
+                "replay-buffer sample), mean ± std over finished seeds.",
                 "",
                 "![Figure 4](figure4_embedding_tsne.png)",
                 "",
-                *_table(["task", "algo", "seed", "states safe / unsafe", "probe accuracy "
-                         "(chance)", "probe AUC", "training probe accuracy",
-                         "training probe AUC"], rows, "lllrrrrr"),
+                *_table(["task", "algo", "seed", "rollouts", "states safe / unsafe",
+                         "probe accuracy (chance)", "probe AUC", "training probe accuracy",
+                         "training probe AUC"], rows, "lllrrrrrr"),
                 "",
             ]
         else:
-            lines += ["No checkpoint to roll out.", ""]
+            lines += ["No checkpoint to roll out and no stored panel.", ""]
     else:
         lines += ["Not drawn (`--no-embeddings`, or no finished run).", ""]
 

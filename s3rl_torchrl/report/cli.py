@@ -45,7 +45,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="a config key (dotted, e.g. algo.pid.kp) that splits the runs of "
                              "one task and algo into separate groups; repeatable")
     parser.add_argument("--no-embeddings", action="store_true",
-                        help="skip Figure 4 and the probe table (no checkpoint rollouts)")
+                        help="skip Figure 4 and the probe table (no checkpoint rollouts); with "
+                             "--export-runs: store no Figure-4 panels")
     parser.add_argument("--embedding-episodes", type=_positive, default=2,
                         help="evaluation env copies rolled out per checkpoint (default: 2)")
     parser.add_argument("--tsne-states", type=_positive, default=1000,
@@ -53,24 +54,28 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                              "t-SNE time grows faster than linearly)")
     parser.add_argument("--export-runs", default=None, metavar="DEST",
                         help="copy config.json, metrics.csv and final_eval.json of every run "
-                             "to DEST (same layout; no checkpoints) and exit: a small tree to "
-                             "keep in version control, rebuilt with `s3rl-report DEST "
-                             "--no-embeddings`")
+                             "to DEST (same layout; no checkpoints), store each group's Figure-4 "
+                             "panel (t-SNE coordinates and probe, drawn from its checkpoint) "
+                             "beside its copy, and exit: a small tree to keep in version "
+                             "control, from which `s3rl-report DEST` rebuilds the report")
     return parser.parse_args(argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
-    from s3rl_torchrl.report.build import build_report
+    from s3rl_torchrl.report.build import build_report, export_embedding_panels
 
     argv = sys.argv[1:] if argv is None else list(argv)
     if args.export_runs is not None:
         try:
             copied = export_runs(args.runs, args.export_runs)
+            panels = [] if args.no_embeddings else export_embedding_panels(
+                args.runs, args.export_runs, args.embedding_episodes, args.tsne_states)
         except ReportError as err:
             print(f"s3rl-report: error: {err}", file=sys.stderr)
             return 2
-        print(f"Copied the results of {len(copied)} runs to {args.export_runs}")
+        print(f"Copied the results of {len(copied)} runs to {args.export_runs}"
+              + (f" and Figure 4's panels of {len(panels)} of them" if panels else ""))
         return 0
     try:
         report = build_report(

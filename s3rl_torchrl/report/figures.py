@@ -8,12 +8,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from s3rl_torchrl.report.probe import ProbeResult
 from s3rl_torchrl.report.runs import RunGroup
 from s3rl_torchrl.report.stats import learning_curve, summarize
+
+if TYPE_CHECKING:  # the panels' type; importing it at run time would pull in torch
+    from s3rl_torchrl.report.embeddings import EmbeddingPanel
 
 __all__ = ["learning_curves", "safe_occupancy_bars", "embedding_tsne", "FORMATS"]
 
@@ -181,36 +184,23 @@ def safe_occupancy_bars(
 
 
 def embedding_tsne(
-    panels: Mapping[str, Mapping[str, tuple[np.ndarray, np.ndarray, ProbeResult]]],
-    out_dir: Path,
-    max_states: int = 1000,
-    seed: int = 0,
+    panels: Mapping[str, Mapping[str, EmbeddingPanel]], out_dir: Path
 ) -> list[Path]:
-    """Figure 4: t-SNE (scikit-learn) of policy-encoder embeddings, safe vs unsafe states.
+    """Figure 4: t-SNE of policy-encoder embeddings, safe vs unsafe states.
 
-    ``panels[task][label] = (embeddings [N, d], safe [N], probe)``: one row per task, one panel
-    per algo (the reference first). At most ``max_states`` states per panel, drawn with a
-    seeded generator; the panel's title gives the linear probe's held-out accuracy / AUC.
+    ``panels[task][label]``: one row per task, one panel per algo (the reference first), each
+    an :class:`~s3rl_torchrl.report.embeddings.EmbeddingPanel` (t-SNE already computed); the
+    panel's title gives the linear probe's held-out accuracy / AUC.
     """
-    from sklearn.manifold import TSNE
-    from threadpoolctl import threadpool_limits
-
     plt = _pyplot()
     tasks = list(panels)
     cols = max(len(p) for p in panels.values())
     fig, axes = plt.subplots(len(tasks), cols, figsize=(4.2 * cols, 4.2 * len(tasks)),
                              squeeze=False)
     for r, task in enumerate(tasks):
-        for c, (label, (z, safe, probe)) in enumerate(panels[task].items()):
+        for c, (label, panel) in enumerate(panels[task].items()):
             ax = axes[r, c]
-            rng = np.random.default_rng(seed)
-            keep = np.sort(rng.permutation(len(z))[:max_states])
-            z, safe = z[keep], safe[keep].astype(bool)
-            perplexity = float(min(30.0, max(2.0, (len(z) - 1) / 3)))
-            # One OpenMP thread: measured 2.5x faster than the default on 2 busy cores.
-            with threadpool_limits(limits=1):
-                xy = TSNE(n_components=2, perplexity=perplexity, init="pca",
-                          random_state=seed).fit_transform(z.astype(np.float64))
+            xy, safe, probe = panel.xy, panel.safe.astype(bool), panel.probe
             ax.scatter(*xy[safe].T, s=4, c=SAFE_COLOUR, label=f"safe ({safe.sum()})", alpha=0.6)
             ax.scatter(*xy[~safe].T, s=4, c=UNSAFE_COLOUR, label=f"unsafe ({(~safe).sum()})",
                        alpha=0.8)

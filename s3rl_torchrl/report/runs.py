@@ -32,6 +32,8 @@ CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.csv"
 FINAL_EVAL_FILE = "final_eval.json"
 CHECKPOINT_DIR = Path("checkpoints") / "latest"
+# Figure 4's panel of a run, stored beside an exported copy (report.embeddings.save_panel).
+FIGURE4_FILES = ("figure4_states.csv", "figure4_probe.json")
 
 #: Config keys that may differ between the seeds of one group: they do not change what is
 #: learned (how a run is logged, resumed, threaded or compiled), or are the seed itself.
@@ -174,14 +176,15 @@ def find_runs(root: str | Path) -> list[Run]:
 
 
 # What a run's results are: small text files. Checkpoints and replay buffers stay behind.
-EXPORTED_FILES = (CONFIG_FILE, METRICS_FILE, FINAL_EVAL_FILE)
+EXPORTED_FILES = (CONFIG_FILE, METRICS_FILE, FINAL_EVAL_FILE, *FIGURE4_FILES)
 
 
 def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
     """Copy the results of every run below ``root`` (``config.json``, ``metrics.csv`` and, once
-    finished, ``final_eval.json``) to the same relative place below ``dest``, so that a report
-    can be rebuilt from a small tree kept in version control (``s3rl-report DEST
-    --no-embeddings``). Returns the copied run directories."""
+    finished, ``final_eval.json``; a Figure-4 panel if the run has one) to the same relative
+    place below ``dest``, so that a report can be rebuilt from a small tree kept in version
+    control (``s3rl-report DEST``). Returns the copied run directories.
+    ``report.build.export_embedding_panels`` adds the panels drawn from the checkpoints."""
     root, dest = Path(root), Path(dest)
     runs = find_runs(root)
     if dest.resolve().is_relative_to(root.resolve()) or root.resolve().is_relative_to(

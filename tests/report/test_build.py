@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from dataclasses import astuple
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +126,8 @@ def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_pat
     checkpoint = tmp_path / "sweep" / "s3rl_seed1" / "checkpoints" / "latest" / "state.pt"
     checkpoint.parent.mkdir(parents=True)
     checkpoint.write_bytes(b"weights")
-    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "kept")]) == 0
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "kept"),
+                 "--no-embeddings"]) == 0
     kept = sorted(p.relative_to(tmp_path / "kept").as_posix() for p in (tmp_path / "kept").rglob("*")
                   if p.is_file())
     assert "s3rl_seed1/config.json" in kept and "s3rl_seed1/final_eval.json" in kept
@@ -137,7 +139,8 @@ def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_pat
     assert table == [line for line in rebuilt.path.read_text().splitlines()
                      if line.startswith("| ")]
     # Exporting into the runs' own tree would copy runs into themselves.
-    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "sweep" / "x")]) == 2
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(tmp_path / "sweep" / "x"),
+                 "--no-embeddings"]) == 2
 
 
 @pytest.fixture(scope="module")
@@ -195,8 +198,44 @@ def test_report_with_checkpoint_rollouts(tiny_runs, tmp_path):
             and "| 3 |" in line]
     assert len(rows) == 2
     for row in rows:
-        safe, unsafe = (int(x) for x in row.split("|")[4].split("/"))
+        cells = row.split("|")
+        assert cells[4].strip() == "2"  # rollouts
+        safe, unsafe = (int(x) for x in cells[5].split("/"))
         assert safe + unsafe == 100
+
+
+def test_exported_panels_redraw_figure4_without_the_checkpoints(tiny_runs, tmp_path):
+    """--export-runs stores each group's panel; the report of the exported tree (no
+    checkpoints) gives the probe table of the report drawn from the checkpoints."""
+    from s3rl_torchrl.report.embeddings import embedding_panel, load_panel
+
+    kept = tmp_path / "kept"
+    assert main([str(tiny_runs), "--export-runs", str(kept), "--tsne-states", "60"]) == 0
+    assert not list(kept.rglob("checkpoints"))
+    for algo in ("s3rl", "sac_lag"):
+        stored = load_panel(kept / algo)
+        max_steps = read_run(tiny_runs / algo).config["eval"]["max_steps"]
+        fresh = embedding_panel(tiny_runs / algo / "checkpoints" / "latest", max_steps=max_steps,
+                                tsne_states=60)
+        assert stored.xy.shape == (60, 2) and stored.episodes == 2
+        np.testing.assert_allclose(stored.xy, fresh.xy, rtol=1e-5, atol=1e-4)
+        np.testing.assert_array_equal(stored.safe, fresh.safe)
+        assert astuple(stored.probe) == pytest.approx(astuple(fresh.probe), nan_ok=True, rel=0)
+
+    def probe_rows(report):
+        return [line for line in report.path.read_text().splitlines()
+                if line.startswith("| SafetySwimmerVelocity-v1 |") and "| 3 |" in line]
+
+    original = build_report(tiny_runs, tmp_path / "r1", tsne_states=60)
+    rebuilt = build_report(kept, tmp_path / "r2", tsne_states=60)
+    assert len(probe_rows(original)) == 2
+    assert probe_rows(rebuilt) == probe_rows(original)
+    assert _non_empty(tmp_path / "r2" / "figure4_embedding_tsne.png")
+    # A tree with neither checkpoints nor panels: Figure 4 is left out with a note.
+    assert main([str(tiny_runs), "--export-runs", str(tmp_path / "bare"), "--no-embeddings"]) == 0
+    bare = build_report(tmp_path / "bare", tmp_path / "r3")
+    assert "No checkpoint to roll out and no stored panel." in bare.path.read_text()
+    assert any("stored panel" in note for note in bare.notes)
 
 
 def test_compare_adds_pairs_beside_the_reference(tmp_path, make_run, capsys):
