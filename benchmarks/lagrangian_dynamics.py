@@ -13,7 +13,7 @@ at a time; an existing run directory is resumed, a finished one skipped), then s
         --settings fsrl pid_ema --seeds 10 20 30 --frames 300000 --runs-dir runs/lagrangian
 
 With ``--group`` the seeds of a task and setting train in ONE process (``s3rl-train
-'seeds=[10,20,30]'``, the multi-seed trainer, eager: ``compile=false``), written to
+'seeds=[10,20,30]'``, the multi-seed trainer), written to
 ``<runs-dir>/<task>/<setting>/seed<k>/`` and resumed as a group.
 
 ``summarise --until FRAMES`` reads every run as if it had stopped at ``FRAMES`` (its epochs up to
@@ -328,7 +328,7 @@ def launch(args: argparse.Namespace) -> list[Path]:
                     f"task={task}",
                     f"seeds=[{seeds}]",
                     f"collector.total_frames={args.frames}",
-                    "compile=false",  # the vmapped step is slower compiled (docs/benchmarks.md)
+                    f"compile={str(args.compile).lower()}",
                     *args.override,
                 ]
                 if (group_dir / "seeds.json").exists():

@@ -50,6 +50,9 @@ def paper_config(
         f"collector.frames_per_epoch={batch}",
         f"task={task}",
         f"collector.total_frames={WARMUP + frames}",
+        # experiment=paper's warm-up is one random collect; the clock starts at WARMUP frames
+        # either way, but the docstring's 10 000 random frames are what is measured after.
+        f"collector.init_random_frames={WARMUP}",
         "eval.episodes=1",
         "eval.max_steps=100",  # evaluation is not what is measured: keep it short
         "eval.random_baseline=false",

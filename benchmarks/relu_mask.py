@@ -1,6 +1,6 @@
 """Why the package has its own ReLU: compiled ``torch.relu`` against ``s3rl_torchrl.modules.relu``.
 
-    python benchmarks/relu_mask.py [--calls 200] [--rounds 5] \
+    python benchmarks/relu_mask.py [--calls 200] [--rounds 5] [--seeds 2] \
         [--out benchmarks/results/relu_mask.json]
 
 Two measurements, one thread, microseconds per call, median over interleaved rounds:
@@ -11,6 +11,8 @@ Two measurements, one thread, microseconds per call, median over interleaved rou
   critics (23 -> 128 -> 128 -> 1, batch 256, weights frozen as in the actor loss), eager
   and compiled, with ``torch.relu`` and with the package's ``relu``. With frozen weights the
   backward of ``torch.relu`` needs only the mask, which AOT autograd saves as bool.
+- ``critic_backward vmap``: the same for ``--seeds`` agents under ``torch.vmap`` (what
+  ``StackedSACLag`` compiles for several seeds in one process).
 
 Results: ``docs/objectives.md`` (compile notes).
 """
@@ -33,27 +35,33 @@ def mask(x: torch.Tensor) -> torch.Tensor:
     return x <= 0
 
 
-def make_critic_step(act):
+def make_critic_step(act, seeds: int | None = None):
+    """``seeds``: that many agents' ensembles, stacked and run under ``torch.vmap``."""
     g = torch.Generator().manual_seed(0)
+    lead = () if seeds is None else (seeds,)
     shapes = [(IN, HIDDEN), (HIDDEN, HIDDEN), (HIDDEN, 1)]
-    weights = [torch.randn(NETS, a, b, generator=g) / a**0.5 for a, b in shapes]
-    biases = [torch.zeros(NETS, 1, b) for _, b in shapes]
-    action = torch.randn(NETS, BATCH, IN, generator=g, requires_grad=True)
+    weights = [torch.randn(*lead, NETS, a, b, generator=g) / a**0.5 for a, b in shapes]
+    biases = [torch.zeros(*lead, NETS, 1, b) for _, b in shapes]
+    action = torch.randn(*lead, NETS, BATCH, IN, generator=g, requires_grad=True)
 
-    def forward(x):
+    def one_agent(x, weights, biases):
         for i, (w, b) in enumerate(zip(weights, biases)):
             x = torch.baddbmm(b, x, w)
             if i < len(weights) - 1:
                 x = act(x)
         return x.mean()
 
-    return forward, action
+    if seeds is None:
+        return lambda x: one_agent(x, weights, biases), action
+    vmapped = torch.vmap(one_agent)
+    return lambda x: vmapped(x, weights, biases).sum(), action
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=2, help="agents in the vmap case")
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/relu_mask.json"))
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -61,17 +69,19 @@ def main() -> None:
     x = torch.randn(NETS, BATCH, HIDDEN)
     compiled_mask = torch.compile(mask)
     cases = {"mask eager": lambda: mask(x), "mask compiled": lambda: compiled_mask(x)}
-    for name, act in (("torch.relu", torch.relu), ("s3rl relu", relu)):
-        for mode in ("eager", "compiled"):
-            forward, action = make_critic_step(act)
-            if mode == "compiled":
-                forward = torch.compile(forward)
+    vmap_case = f"critic_backward vmap K={args.seeds}"
+    for seeds, case in ((None, "critic_backward"), (args.seeds, vmap_case)):
+        for name, act in (("torch.relu", torch.relu), ("s3rl relu", relu)):
+            for mode in ("eager", "compiled"):
+                forward, action = make_critic_step(act, seeds)
+                if mode == "compiled":
+                    forward = torch.compile(forward)
 
-            def step(forward=forward, action=action):
-                forward(action).backward()
-                action.grad = None
+                def step(forward=forward, action=action):
+                    forward(action).backward()
+                    action.grad = None
 
-            cases[f"critic_backward {name} {mode}"] = step
+                cases[f"{case} {name} {mode}"] = step
     # The warm-up calls also compile.
     rounds = interleaved_rounds(cases, args.calls, args.rounds, warmup=5)
     rows = {
@@ -80,7 +90,7 @@ def main() -> None:
     }
     for name, row in rows.items():
         print(f"{name:40s} {row['us']:9.1f} us")
-    write_report(args.out, {"threads": 1, "results": rows})
+    write_report(args.out, {"threads": 1, "seeds": args.seeds, "results": rows})
 
 
 if __name__ == "__main__":

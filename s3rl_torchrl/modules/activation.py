@@ -1,20 +1,24 @@
-"""ReLU whose backward reads its float output, so that compiled networks stay fast on CPU.
+"""ReLU that keeps bool masks out of compiled graphs, so that compiled networks stay fast on CPU.
 
 Eager, :func:`relu` and :class:`ReLU` are ``torch.relu`` and ``nn.ReLU``. Under
-``torch.compile`` they trace a ReLU whose gradient is ``grad * sign(output)``.
+``torch.compile`` they trace ``x * sign(max(x, 0))`` with the factor detached: the same values
+(``-0.0`` for ``x < 0``, equal to ``0.0``) and the same gradient as ``torch.relu`` (``grad``
+where ``x > 0``, 0 elsewhere, 0 at 0 included), built from float tensors only.
 
 Why: for ``torch.relu``, AOT autograd saves the backward's mask ``output <= 0`` as a **bool**
 tensor, which takes a byte per element instead of four. It does so whenever the ReLU's output
 is not needed otherwise, e.g. when a critic is evaluated with detached parameters for the actor
-loss. On this machine's AVX-512 CPU (torch 2.13), inductor writes and reads bool tensors one
-lane at a time through a generic 64-lane vector. Storing the mask of one ``[4, 256, 128]``
-critic activation then costs ~1.1 ms against ~0.05 ms eager, and the forward and input-gradient
-backward of a 3-layer critic ensemble 4.4 ms compiled against 1.2 ms eager; 1.1 ms with this
-ReLU (``benchmarks/relu_mask.py``, ``docs/objectives.md``).
+loss. On these machines' CPUs (torch 2.13), inductor writes and reads bool tensors one lane at
+a time through a generic vector. Storing the mask of one ``[4, 256, 128]`` critic activation
+then costs ~18x its eager time, and the forward and input-gradient backward of a 3-layer critic
+ensemble ~3.8x (``benchmarks/relu_mask.py``, ``docs/objectives.md``).
 
-``sign(output)`` is computed from a float tensor that the backward saves anyway, so no bool
-tensor crosses a kernel boundary. The gradient is the same as ``torch.relu``'s: ``grad`` where
-the output is positive and 0 elsewhere.
+An earlier version was an ``autograd.Function`` whose backward read the float output. Under
+``torch.vmap`` (several seeds in one compiled step: ``StackedSACLag``) inductor traced through
+it to ``clamp_min``'s own backward and stored bool masks again. Plain differentiable ops leave
+it nothing to trace through (``benchmarks/relu_mask.py``, the ``critic_backward vmap`` rows).
+``x = -inf`` gives ``nan`` instead of 0: a network whose pre-activations are infinite has
+diverged anyway.
 """
 
 from __future__ import annotations
@@ -25,29 +29,18 @@ from torch import Tensor, nn
 __all__ = ["ReLU", "relu"]
 
 
-class _ReLUFromOutput(torch.autograd.Function):
-    generate_vmap_rule = True  # the loss's vmap critic modes may trace it under vmap
-
-    @staticmethod
-    def forward(x: Tensor) -> Tensor:
-        return x.clamp_min(0)
-
-    @staticmethod
-    def setup_context(ctx, inputs, output) -> None:
-        ctx.save_for_backward(output)
-
-    @staticmethod
-    def backward(ctx, grad: Tensor) -> Tensor:
-        (output,) = ctx.saved_tensors
-        return grad * output.sign()
+def _relu_without_mask(x: Tensor) -> Tensor:
+    # The factor is 1 where x > 0 and 0 elsewhere (sign(0) = 0); detached, so the backward is
+    # grad * factor, a float product.
+    return x * x.detach().clamp_min(0).sign()
 
 
 def relu(x: Tensor, inplace: bool = False) -> Tensor:
-    """``torch.relu`` (``relu_`` with ``inplace``). Under ``torch.compile`` it is a ReLU whose
-    backward reads its float output instead of a saved bool mask. ``inplace`` is ignored then:
-    inductor plans the buffers itself."""
+    """``torch.relu`` (``relu_`` with ``inplace``). Under ``torch.compile`` it is a ReLU made of
+    float ops, with no bool mask saved for the backward. ``inplace`` is ignored then: inductor
+    plans the buffers itself."""
     if torch.compiler.is_compiling():
-        return _ReLUFromOutput.apply(x)
+        return _relu_without_mask(x)
     return torch.relu_(x) if inplace else torch.relu(x)
 
 

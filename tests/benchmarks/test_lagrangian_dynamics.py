@@ -133,7 +133,7 @@ def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
 
 def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
     args = ["launch", "--experiment", "tiny", "--settings", "pid_ema", "--seeds", "1", "2"]
-    args += ["--frames", "400", "--group", "--runs-dir", str(tmp_path / "runs")]
+    args += ["--frames", "400", "--group", "--no-compile", "--runs-dir", str(tmp_path / "runs")]
     report = ld.main(args)
     (row,) = report["settings"]
     assert row["seeds"] == [1, 2] and row["frames"] == 400

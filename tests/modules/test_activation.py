@@ -57,7 +57,13 @@ def test_inplace_and_module():
     assert module(torch.tensor([-3.0, 4.0])).tolist() == [0.0, 4.0]
 
 
-def _saved_dtypes(act, requires_grad_weights):
+def _two_agents(act, x, w1, w2):
+    """Two agents' copies under torch.vmap, as StackedSACLag runs several seeds' losses."""
+    stack = [torch.stack([t, 2 * t]) for t in (x, w1, w2)]
+    return torch.vmap(lambda *a: _two_layer(act, *a))(*stack).sum()
+
+
+def _saved_dtypes(act, requires_grad_weights, fn=_two_layer):
     """dtypes of the tensors the compiled forward saves for the backward."""
     saved = []
 
@@ -79,20 +85,21 @@ def _saved_dtypes(act, requires_grad_weights):
         decompositions=select_decomp_table(),
     )
     torch._dynamo.reset()
-    compiled = torch.compile(_two_layer, backend=backend, fullgraph=True)
+    compiled = torch.compile(fn, backend=backend, fullgraph=True)
     out, grads = _grads(compiled, act, requires_grad_weights)
     return saved, out, grads
 
 
+@pytest.mark.parametrize("fn", [_two_layer, _two_agents], ids=["one", "vmapped"])
 @pytest.mark.parametrize("requires_grad_weights", [True, False])
-def test_compiled_saves_no_bool_mask_and_matches_eager(requires_grad_weights):
-    ref_out, ref_grads = _grads(_two_layer, torch.relu, requires_grad_weights)
+def test_compiled_saves_no_bool_mask_and_matches_eager(requires_grad_weights, fn):
+    ref_out, ref_grads = _grads(fn, torch.relu, requires_grad_weights)
     # torch.relu under AOT autograd: with frozen weights (the actor loss's critics) the backward
     # needs only the mask, which is saved as bool -- the slow case on CPU.
-    torch_saved, _, _ = _saved_dtypes(torch.relu, requires_grad_weights)
+    torch_saved, _, _ = _saved_dtypes(torch.relu, requires_grad_weights, fn)
     if not requires_grad_weights:
         assert torch.bool in torch_saved
-    saved, out, grads = _saved_dtypes(relu, requires_grad_weights)
+    saved, out, grads = _saved_dtypes(relu, requires_grad_weights, fn)
     assert torch.bool not in saved
     torch.testing.assert_close(out, ref_out)
     for got, want in zip(grads, ref_grads):

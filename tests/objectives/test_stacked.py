@@ -103,6 +103,34 @@ def test_losses_and_gradients_equal_each_single_loss(num_costs):
         assert out["lagrangian"].squeeze(-1).tolist() == [0.0, 0.5, 1.0]
 
 
+@pytest.mark.slow  # torch.compile of the vmapped loss: about a minute on a busy 2-core machine
+def test_compiled_group_equals_each_eager_single_loss():
+    """Compiled (`compile=true` with `seeds`), the vmapped step traces the package's ReLU as
+    float ops; losses and gradients are still each eager single loss's."""
+    from s3rl_torchrl.trainer.loop import compile_loss
+
+    losses = make_losses(1)
+    references = [copy.deepcopy(loss) for loss in losses]
+    group = StackedSACLag(losses, LR["actor_lr"], LR["critic_lr"], LR["alpha_lr"], TAU,
+                          compile_fn=compile_loss)
+    batches, noise = make_batches(1), make_noise()
+    out = group.loss(batches, noise)
+    sum(v.sum() for k, v in out.items() if k.startswith("loss_")).backward()
+    stacked_grads = {k: v.grad for k, v in group.params.flatten_keys().items()
+                     if v.grad is not None}
+    for k, reference in enumerate(references):
+        with _normal_noise(noise[k].unbind(0)):
+            expected = reference(batches[k].clone())
+        sum(v for key, v in expected.items() if key.startswith("loss_")).backward()
+        for key in expected.keys():
+            torch.testing.assert_close(out[key][k], expected[key].detach(), rtol=1e-4, atol=1e-5)
+        reference_leaves = leaves(reference)
+        for key, grad in stacked_grads.items():
+            torch.testing.assert_close(
+                grad[k], reference_leaves[key].grad, rtol=1e-4, atol=1e-5, msg=key
+            )
+
+
 @pytest.mark.parametrize("fixed_alpha", [False, True])
 def test_updates_equal_separate_adams_and_target_updates(fixed_alpha):
     losses = make_losses(1, fixed_alpha=fixed_alpha)
