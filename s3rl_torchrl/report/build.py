@@ -242,8 +242,9 @@ def export_embedding_panels(
 ) -> list[Path]:
     """Store Figure 4's panel of each group below ``root`` beside its copy below ``dest`` (as
     ``export_runs`` laid it out), so that ``s3rl-report DEST`` draws Figure 4 without the
-    checkpoints. Returns the run directories that got one."""
-    from s3rl_torchrl.report.embeddings import embedding_panel, save_panel
+    checkpoints; panels of the group's other runs left by an earlier export are removed.
+    Returns the run directories that got one."""
+    from s3rl_torchrl.report.embeddings import PANEL_FILES, embedding_panel, save_panel
 
     root, dest = Path(root), Path(dest)
     stored = []
@@ -254,6 +255,12 @@ def export_embedding_panels(
         max_steps = run.config.get("eval", {}).get("max_steps")
         target = dest / run.path.relative_to(root)
         save_panel(embedding_panel(run.checkpoint, episodes, max_steps, tsne_states), target)
+        # One panel per group: an earlier export's panel on another seed would be drawn
+        # instead of this one if that seed were lower.
+        for other in group.runs:
+            if other is not run:
+                for name in PANEL_FILES:
+                    (dest / other.path.relative_to(root) / name).unlink(missing_ok=True)
         stored.append(target)
     return stored
 

@@ -183,7 +183,8 @@ def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
     """Copy the results of every run below ``root`` (``config.json``, ``metrics.csv`` and, once
     finished, ``final_eval.json``; a Figure-4 panel if the run has one) to the same relative
     place below ``dest``, so that a report can be rebuilt from a small tree kept in version
-    control (``s3rl-report DEST``). Returns the copied run directories.
+    control (``s3rl-report DEST``). A file an earlier export left in a run's copy that the
+    run no longer has is removed. Returns the copied run directories.
     ``report.build.export_embedding_panels`` adds the panels drawn from the checkpoints."""
     root, dest = Path(root), Path(dest)
     runs = find_runs(root)
@@ -198,6 +199,10 @@ def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
         for name in EXPORTED_FILES:
             if (run.path / name).is_file():
                 shutil.copyfile(run.path / name, target / name)
+            elif name not in FIGURE4_FILES:
+                # e.g. the final_eval.json of an earlier export of a run now re-run: the copy
+                # must say what the run says. Panels stay: export_embedding_panels owns them.
+                (target / name).unlink(missing_ok=True)
         copied.append(target)
     return copied
 

@@ -143,6 +143,39 @@ def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_pat
                  "--no-embeddings"]) == 2
 
 
+def test_export_again_removes_what_the_runs_no_longer_have(tmp_path, make_run, monkeypatch):
+    """A re-export mirrors the runs: a final_eval.json of a run that is unfinished now goes,
+    and a group keeps one Figure-4 panel (the one drawn now), not an earlier one on another
+    seed."""
+    from s3rl_torchrl.report import embeddings
+    from s3rl_torchrl.report.probe import ProbeResult
+
+    _sweep(tmp_path, make_run)
+    kept = tmp_path / "kept"
+    (kept / "s3rl_seed4").mkdir(parents=True)
+    (kept / "s3rl_seed4" / "final_eval.json").write_text("{}")  # from an earlier export
+    for name in embeddings.PANEL_FILES:  # an earlier panel on seed 1
+        (kept / "s3rl_seed1").mkdir(exist_ok=True)
+        (kept / "s3rl_seed1" / name).write_text("old")
+    # Only seed 2 has a checkpoint now, so its panel is drawn (a fixed one: no rollout here).
+    (tmp_path / "sweep" / "s3rl_seed2" / "checkpoints" / "latest").mkdir(parents=True)
+    panel = embeddings.EmbeddingPanel(
+        xy=np.zeros((4, 2)), safe=np.array([True, False, True, False]),
+        probe=ProbeResult(0.75, 0.8, 0.5, 2, 2, 2, 2), episodes=2)
+    monkeypatch.setattr(embeddings, "embedding_panel", lambda *a, **k: panel)
+
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(kept)]) == 0
+    assert not (kept / "s3rl_seed4" / "final_eval.json").exists()
+    assert (kept / "s3rl_seed4" / "metrics.csv").is_file()
+    assert not any((kept / "s3rl_seed1" / name).exists() for name in embeddings.PANEL_FILES)
+    stored = embeddings.load_panel(kept / "s3rl_seed2")
+    np.testing.assert_array_equal(stored.safe, panel.safe)
+    assert stored.probe.accuracy == 0.75
+    # sac_lag has no checkpoint: nothing drawn, nothing removed.
+    assert not any((kept / f"sac_lag_seed{s}" / embeddings.PANEL_FILES[0]).exists()
+                   for s in (1, 2, 3))
+
+
 @pytest.fixture(scope="module")
 def tiny_runs(tmp_path_factory):
     """S3RL and SAC-Lag, one tiny run each on Swimmer-v1 (it has unsafe states within 600
