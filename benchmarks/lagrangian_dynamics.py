@@ -256,34 +256,48 @@ def copy_metrics(runs: list[dict], csv_dir: Path) -> None:
         shutil.copyfile(Path(run["run_dir"]) / "metrics.csv", target)
 
 
-def plot(runs: list[dict], path: Path) -> None:
-    """Lambda and cost (evaluation and training episodes) against frames, one column per run."""
+def plot(runs: list[dict], path: Path):
+    """Lambda and cost (evaluation and training episodes) against frames: one pair of rows
+    (lambda above cost) per task, algo and setting, one column per seed."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, len(runs), figsize=(4 * len(runs), 5.5), squeeze=False)
-    for j, run in enumerate(runs):
-        rows = read_rows(Path(run["run_dir"]) / "metrics.csv")
-        frames = [_float(r["frames"]) / 1e3 for r in rows]
-        axes[0, j].plot(frames, [_float(r["lagrangian"]) for r in rows], "k.-")
-        title = f"{run['task'].replace('Safety', '')} {run['algo']} seed {run['seed']}"
-        title += f"\n{run['setting']}"
-        axes[0, j].set_title(textwrap.fill(title.replace(",", ", "), 48), fontsize=7)
-        axes[0, j].set_ylabel("lambda after the update")
-        axes[1, j].plot(frames, [_float(r["eval/cost"]) for r in rows], "r.-", label="eval")
-        axes[1, j].plot(frames, [_float(r["train/cost"]) for r in rows], "b.-", label="train")
-        axes[1, j].axhline(run["cost_limit"], color="gray", ls="--", label="limit")
-        axes[1, j].set_yscale("symlog", linthresh=10)
-        axes[1, j].set_ylim(bottom=0)
-        axes[1, j].set_xlabel("frames (k)")
-        axes[1, j].set_ylabel("episode cost")
-        axes[1, j].legend(fontsize=6)
+    groups: dict[tuple, list[dict]] = {}
+    for run in runs:
+        groups.setdefault((run["task"], run["algo"], run["setting"]), []).append(run)
+    columns = max(len(g) for g in groups.values())
+    fig, axes = plt.subplots(2 * len(groups), columns, figsize=(4 * columns, 5 * len(groups)),
+                             squeeze=False)
+    for ax in axes.flat:
+        ax.set_visible(False)
+    for i, group in enumerate(groups.values()):
+        for j, run in enumerate(sorted(group, key=lambda r: r["seed"])):
+            top, bottom = axes[2 * i, j], axes[2 * i + 1, j]
+            top.set_visible(True)
+            bottom.set_visible(True)
+            rows = read_rows(Path(run["run_dir"]) / "metrics.csv")
+            frames = [_float(r["frames"]) / 1e3 for r in rows]
+            top.plot(frames, [_float(r["lagrangian"]) for r in rows], "k.-")
+            title = f"{run['task'].replace('Safety', '')} {run['algo']} seed {run['seed']}\n"
+            title += textwrap.fill(run["setting"].replace(",", ", "), 60)
+            top.set_title(title, fontsize=8)
+            top.set_ylabel("lambda after the update")
+            bottom.plot(frames, [_float(r["eval/cost"]) for r in rows], "r.-", label="eval")
+            bottom.plot(frames, [_float(r["train/cost"]) for r in rows], "b.-", label="train")
+            bottom.axhline(run["cost_limit"], color="gray", ls="--", label="limit")
+            bottom.set_yscale("symlog", linthresh=10)
+            bottom.set_ylim(bottom=0)
+            bottom.set_xlabel("frames (k)")
+            bottom.set_ylabel("episode cost")
+            bottom.legend(fontsize=6)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
     print(f"wrote {path}")
+    return fig
 
 
 def summarise(

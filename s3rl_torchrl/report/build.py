@@ -16,7 +16,13 @@ from s3rl_torchrl.report.runs import (
     find_runs,
     group_runs,
 )
-from s3rl_torchrl.report.stats import MeanStd, TestResult, compare_groups, summarize
+from s3rl_torchrl.report.stats import (
+    WITHIN_SEED_SHARE_MIN,
+    MeanStd,
+    TestResult,
+    compare_groups,
+    summarize,
+)
 
 __all__ = ["build_report", "export_embedding_panels", "Report"]
 
@@ -347,7 +353,11 @@ def build_report(
         f"Difference of means ({reference} minus the other). Paired t-test over the seeds both "
         "algos ran (runs paired by seed; seeds present for only one are left out); Welch's "
         "t-test over the pooled evaluation episodes; 95% confidence intervals of the "
-        "difference (scipy.stats `ttest_rel` / `ttest_ind(equal_var=False)`).",
+        "difference (scipy.stats `ttest_rel` / `ttest_ind(equal_var=False)`). The test over "
+        "episodes is flagged where less than "
+        f"{WITHIN_SEED_SHARE_MIN:.0%} of a group's variance over episodes is within seeds: "
+        "its episodes are then near copies of one seed's policy, not independent samples, "
+        "and only the test over seeds means anything.",
         "",
         *_differences(by_task, reference, pairs),
         "",

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -33,6 +33,7 @@ __all__ = [
     "paired_seed_test",
     "welch_episode_test",
     "compare_groups",
+    "within_seed_share",
     "learning_curve",
 ]
 
@@ -182,14 +183,44 @@ def welch_episode_test(
     )
 
 
+#: Below this share of the pooled variance coming from within seeds, a seed's episodes are
+#: near copies of one another (a deterministic policy from an almost fixed start state), so
+#: pooling them multiplies one sample per seed and the Welch test's p-value is far too small.
+WITHIN_SEED_SHARE_MIN = 0.05
+
+
+def within_seed_share(runs: Sequence[Run], metric: str) -> float:
+    """Mean over seeds of the variance of a seed's episodes, over the variance of all the
+    episodes pooled (1: seeds alike, 0: each seed's episodes identical); NaN without
+    per-episode values or without any variance."""
+    per_seed = []
+    for run in runs:
+        episodes = run.final.get(EPISODE_KEYS[metric]) if run.finished else None
+        if episodes:
+            per_seed.append(np.asarray(episodes, dtype=float))
+    if not per_seed:
+        return math.nan
+    pooled = np.concatenate(per_seed).var()
+    if pooled == 0:
+        return math.nan
+    return float(np.mean([e.var() for e in per_seed]) / pooled)
+
+
 def compare_groups(
     reference: RunGroup, baseline: RunGroup, metric: str
 ) -> tuple[TestResult, TestResult]:
-    """(paired over seeds, Welch over episodes) of ``metric`` ("reward" or "cost")."""
+    """(paired over seeds, Welch over episodes) of ``metric`` ("reward" or "cost"). The Welch
+    result is flagged when a group's episodes vary almost only between seeds
+    (``WITHIN_SEED_SHARE_MIN``): then only the test over seeds means anything."""
     ref_runs, base_runs = reference.finished, baseline.finished
+    welch = welch_episode_test(episode_values(ref_runs, metric), episode_values(base_runs, metric))
+    shares = [within_seed_share(runs, metric) for runs in (ref_runs, base_runs)]
+    if any(share < WITHIN_SEED_SHARE_MIN for share in shares):  # NaN compares False
+        note = "episodes of a seed near copies, not independent: use the test over seeds"
+        welch = replace(welch, note=f"{welch.note}; {note}" if welch.note else note)
     return (
         paired_seed_test(seed_values(ref_runs, metric), seed_values(base_runs, metric)),
-        welch_episode_test(episode_values(ref_runs, metric), episode_values(base_runs, metric)),
+        welch,
     )
 
 

@@ -201,3 +201,25 @@ def test_algos_with_the_same_controller_are_summarised_apart(tmp_path):
         "pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
         "s3rl/pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
     ]
+
+
+def test_plot_has_a_pair_of_rows_per_setting_and_a_column_per_seed(tmp_path):
+    rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
+    updates = [(20000, 0.0), (40000, 9.0)]
+    runs = [fake_run(tmp_path / "sac_lag", seed, rows, updates) for seed in (20, 10)]
+    s3rl = fake_run(tmp_path / "s3rl", 10, rows, updates)
+    config = json.loads((s3rl / "config.json").read_text())
+    config["algo"]["name"] = "s3rl"
+    (s3rl / "config.json").write_text(json.dumps(config))
+    summaries = [ld.summarise_run(r) for r in [*runs, s3rl]]
+    fig = ld.plot(summaries, tmp_path / "dynamics.png")
+    assert (tmp_path / "dynamics.png").stat().st_size > 0
+    grid = fig.axes[0].get_subplotspec().get_gridspec()
+    assert (grid.nrows, grid.ncols) == (4, 2)  # (lambda, cost) x 2 settings, 2 seeds at most
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(visible) == 6  # s3rl has one seed: its second column stays empty
+    assert [ax.get_title().split("\n")[0] for ax in visible if ax.get_title()] == [
+        "HalfCheetahVelocity-v1 sac_lag seed 10",
+        "HalfCheetahVelocity-v1 sac_lag seed 20",
+        "HalfCheetahVelocity-v1 s3rl seed 10",
+    ]

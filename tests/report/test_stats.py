@@ -15,6 +15,7 @@ from s3rl_torchrl.report.stats import (
     paired_seed_test,
     summarize,
     welch_episode_test,
+    within_seed_share,
 )
 
 REF = {1: 10.0, 2: 14.5, 3: 9.0, 4: 13.0}
@@ -106,6 +107,33 @@ def test_compare_groups_pairs_by_seed(tmp_path, make_run):
     pooled_base = np.concatenate([np.subtract(r, s) for s, (r, _) in ep.items()])
     expected = stats.ttest_ind(pooled_ref, pooled_base, equal_var=False)
     assert welch.pvalue == pytest.approx(expected.pvalue)
+    assert welch.note == ""  # the seeds' episodes differ enough (share below, by hand)
+
+
+def test_within_seed_share_by_hand_and_the_flag_on_copied_episodes(tmp_path, make_run):
+    _, groups = _groups(tmp_path, make_run)
+    # s3rl rewards: within-seed variances 8/3, 8/3, 2/3 (mean 2); the 9 pooled values have
+    # mean 114/9 and mean square 1758/9.
+    pooled = 1758 / 9 - (114 / 9) ** 2
+    assert within_seed_share(groups["s3rl"].finished, "reward") == pytest.approx(2 / pooled)
+    # A deterministic policy from a nearly fixed start: every episode of a seed the same
+    # (SafetyBallRun-v0's final evaluations). The Welch test over 3 x 10 copies gives a small
+    # p-value that the paired test over the 3 seeds does not; the table says so.
+    for seed, reward, gap in ((1, 10.0, 9.0), (2, 30.0, 13.0), (3, 17.0, 5.0)):
+        episodes = {"rewards": [reward] * 10, "costs": [1.0] * 10, "lengths": [50] * 10,
+                    "safe_steps": [49] * 10}
+        make_run(tmp_path / "copies" / f"s3rl{seed}", algo="s3rl", seed=seed, episodes=episodes)
+        base = {**episodes, "rewards": [reward - gap] * 10}
+        make_run(tmp_path / "copies" / f"lag{seed}", algo="sac_lag", seed=seed, episodes=base)
+    copies = {g.algo: g for g in group_runs(find_runs(tmp_path / "copies"))}
+    assert within_seed_share(copies["s3rl"].finished, "reward") == 0.0
+    paired, welch = compare_groups(copies["s3rl"], copies["sac_lag"], "reward")
+    assert "near copies" in welch.note and paired.note == ""
+    assert welch.pvalue < 0.05 < paired.pvalue
+    # costs: no variance at all, so no share and no flag (the test reports "no variance").
+    assert math.isnan(within_seed_share(copies["s3rl"].finished, "cost"))
+    _, welch_cost = compare_groups(copies["s3rl"], copies["sac_lag"], "cost")
+    assert "near copies" not in welch_cost.note
 
 
 def test_learning_curve_keeps_unfinished_runs(tmp_path, make_run):
