@@ -65,9 +65,14 @@ def test_report_on_synthetic_runs(tmp_path, make_run):
     welch = stats.ttest_ind(s3rl_pooled, lag_pooled, equal_var=False)
     ci = welch.confidence_interval(0.95)
     diff_row = next(line for line in text.splitlines() if "| reward | s3rl − sac_lag |" in line)
-    assert f"p = {welch.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] (12 vs 12 episodes)" in (
+    assert f"p = {welch.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] (12 vs 12 episodes" in (
         diff_row
     )
+    # Each seed's 4 episodes are 0, 1, 2, 3 above its base (variance 1.25) while sac_lag's
+    # seeds are 10 apart (variance of the seed means 200 / 3): the within-seed share of its
+    # pooled variance is under 5%, so the Welch cell is flagged.
+    assert 1.25 / (1.25 + 200 / 3) < 0.05
+    assert "12 vs 12 episodes; episodes of a seed near copies" in diff_row
     # Paired over seeds (differences 5, 6, 7), as scipy computes it.
     paired = stats.ttest_rel(seed_means, [np.mean(rewards["sac_lag", s]) for s in (1, 2, 3)])
     ci = paired.confidence_interval(0.95)
