@@ -73,6 +73,10 @@ SETTINGS: dict[str, list[str]] = {
         "collector.frames_per_epoch=20000",
     ],
     "learned": ["algo.lagrangian=learned"],  # Adam on lambda (J - d), OmniSafe's SACLag
+    # pid_ema with a 20x integral gain: with ki = 0.0005 the integral adds ~0.025 to lambda per
+    # update at an error of 50, so over 15-50 updates pid_ema is a P controller whose cost
+    # settles at lambda / kp above the limit; a larger ki is what can close that offset.
+    "pid_ema_ki0.01": ["pid=ema", "algo.pid.ki=0.01"],
 }
 BASE_OVERRIDES = ["algo=sac_lag", "threads=1", "logger.progress_bar=false"]
 METRICS = (
@@ -395,7 +399,7 @@ def plant_settings() -> dict[str, Callable[[float], object]]:
     from s3rl_torchrl.trainer.builders import build_lagrangian
 
     register_configs()
-    settings = {name: SETTINGS[name] for name in ("fsrl", "pid_ema", "learned")}
+    settings = {name: SETTINGS[name] for name in ("fsrl", "pid_ema", "pid_ema_ki0.01", "learned")}
     settings["learned_lr0.05"] = [*SETTINGS["learned"], "algo.lagrangian_lr=0.05"]
     made = {}
     with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):

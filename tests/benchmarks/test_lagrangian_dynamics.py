@@ -177,6 +177,8 @@ def test_plant_mode_builds_the_configured_controllers(tmp_path):
     assert rows["fsrl"]["first_lambdas_seed0"] == [133.945, 0.0, 135.385, 0.38]
     # ... pid=ema's first update 0.05 * 44.5 + 0.0005 * 890 + 0.1 * 44.5; Adam's first steps = lr
     assert rows["pid_ema"]["first_lambdas_seed0"][0] == pytest.approx(7.12)
+    # ... the same with ki = 0.01: 0.05 * 44.5 + 0.01 * 890 + 0.1 * 44.5
+    assert rows["pid_ema_ki0.01"]["first_lambdas_seed0"][0] == pytest.approx(15.575)
     assert rows["learned"]["first_lambdas_seed0"][:2] == pytest.approx([0.005, 0.01], abs=1e-6)
     assert rows["learned_lr0.05"]["first_lambdas_seed0"][0] == pytest.approx(0.05, abs=1e-6)
     # Second half (updates 3, 4): J = 900 then 0 for FSRL, over the limit once in two.
