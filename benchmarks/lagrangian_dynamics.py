@@ -14,7 +14,8 @@ at a time; an existing run directory is resumed, a finished one skipped), then s
 
 With ``--group`` the seeds of a task and setting train in ONE process (``s3rl-train
 'seeds=[10,20,30]'``, the multi-seed trainer), written to
-``<runs-dir>/<task>/<setting>/seed<k>/`` and resumed as a group.
+``<runs-dir>/<task>/<setting>/seed<k>/`` and resumed as a group. The runs are SAC-Lag's;
+``--algo s3rl`` runs S3RL instead, into ``<runs-dir>/<task>/s3rl/<setting>/``.
 
 ``summarise --until FRAMES`` reads every run as if it had stopped at ``FRAMES`` (its epochs up to
 there, its lambda updates up to there, no final evaluation): a 1M-frame run then counts as a
@@ -58,7 +59,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import write_report  # noqa: E402
 
 # Controller settings of the comparison, as s3rl-train overrides on top of
-# experiment=paper (--experiment) algo=sac_lag; frames_per_epoch stays the experiment's.
+# experiment=paper (--experiment) algo=sac_lag (--algo); frames_per_epoch stays the experiment's.
 SETTINGS: dict[str, list[str]] = {
     "fsrl": ["pid=fsrl"],  # the paper's PID in FSRL's form, one update per 20-episode collect
     "pid_ema": ["pid=ema"],  # the same gains, OmniSafe's EMA of error and cost, delay 10
@@ -78,7 +79,16 @@ SETTINGS: dict[str, list[str]] = {
     # settles at lambda / kp above the limit; a larger ki is what can close that offset.
     "pid_ema_ki0.01": ["pid=ema", "algo.pid.ki=0.01"],
 }
-BASE_OVERRIDES = ["algo=sac_lag", "threads=1", "logger.progress_bar=false"]
+BASE_OVERRIDES = ["threads=1", "logger.progress_bar=false"]
+LAGRANGIAN_ALGOS = ("sac_lag", "s3rl")  # the off-policy SAC pair whose schedule this studies
+
+
+def setting_dir(runs_dir: Path, task: str, algo: str, setting: str) -> Path:
+    """Where the launcher puts a group: ``<task>/<setting>`` for SAC-Lag (the original layout),
+    ``<task>/<algo>/<setting>`` for any other algo."""
+    if algo == "sac_lag":
+        return (runs_dir / task / setting).resolve()
+    return (runs_dir / task / algo / setting).resolve()
 METRICS = (
     "eval_cost_over_limit",
     "train_cost_over_limit",
@@ -333,7 +343,7 @@ def launch(args: argparse.Namespace) -> list[Path]:
     for task in args.tasks:
         for setting in args.settings:
             if args.group:
-                group_dir = (args.runs_dir / task / setting).resolve()
+                group_dir = setting_dir(args.runs_dir, task, args.algo, setting)
                 seed_dirs = [group_dir / f"seed{seed}" for seed in args.seeds]
                 run_dirs.extend(seed_dirs)
                 if all((d / "final_eval.json").exists() for d in seed_dirs):
@@ -341,6 +351,7 @@ def launch(args: argparse.Namespace) -> list[Path]:
                 seeds = ",".join(map(str, args.seeds))
                 overrides = [
                     f"experiment={args.experiment}",
+                    f"algo={args.algo}",
                     *BASE_OVERRIDES,
                     *SETTINGS[setting],
                     f"task={task}",
@@ -355,12 +366,13 @@ def launch(args: argparse.Namespace) -> list[Path]:
                 todo.append((group_dir, [sys.executable, "-m", "recipes.train", *overrides]))
                 continue
             for seed in args.seeds:
-                run_dir = (args.runs_dir / task / setting / f"seed{seed}").resolve()
+                run_dir = setting_dir(args.runs_dir, task, args.algo, setting) / f"seed{seed}"
                 run_dirs.append(run_dir)
                 if (run_dir / "final_eval.json").exists():
                     continue
                 overrides = [
                     f"experiment={args.experiment}",
+                    f"algo={args.algo}",
                     *BASE_OVERRIDES,
                     *SETTINGS[setting],
                     f"task={task}",
@@ -404,7 +416,8 @@ def plant_settings() -> dict[str, Callable[[float], object]]:
     made = {}
     with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):
         for name, overrides in settings.items():
-            cfg = validate(compose(config_name="train", overrides=[*BASE_OVERRIDES, *overrides]))
+            overrides = ["algo=sac_lag", *BASE_OVERRIDES, *overrides]
+            cfg = validate(compose(config_name="train", overrides=overrides))
             made[name] = lambda limit, algo=cfg.algo: build_lagrangian(algo, limit)
     return made
 
@@ -473,6 +486,12 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--seeds", nargs="+", type=int, default=[10, 20, 30])
     p.add_argument("--frames", type=int, default=300_000)
     p.add_argument("--experiment", default="paper", help="s3rl-train experiment (sizes)")
+    p.add_argument(
+        "--algo",
+        default="sac_lag",
+        choices=LAGRANGIAN_ALGOS,
+        help="s3rl-train algo (one with a Lagrange multiplier)",
+    )
     p.add_argument("--runs-dir", type=Path, default=Path("runs/lagrangian"))
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--compile", action=argparse.BooleanOptionalAction, default=True)

@@ -134,15 +134,18 @@ def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
 def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
     args = ["launch", "--experiment", "tiny", "--settings", "pid_ema", "--seeds", "1", "2"]
     args += ["--frames", "400", "--group", "--no-compile", "--runs-dir", str(tmp_path / "runs")]
+    args += ["--algo", "s3rl"]
     report = ld.main(args)
     (row,) = report["settings"]
-    assert row["seeds"] == [1, 2] and row["frames"] == 400
+    assert row["algo"] == "s3rl" and row["seeds"] == [1, 2] and row["frames"] == 400
     assert row["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
-    group = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "pid_ema"
+    # Any algo but SAC-Lag gets its own level, so its groups never resume SAC-Lag's.
+    group = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "s3rl" / "pid_ema"
     assert (group / "seeds.json").is_file()
     for seed in (1, 2):
         config = json.loads((group / f"seed{seed}" / "config.json").read_text())
         assert config["seed"] == seed and config["algo"]["pid"]["ema_alpha"] == 0.95
+        assert config["algo"]["name"] == "s3rl"
         assert (group / f"seed{seed}" / "final_eval.json").is_file()
     launched = capsys.readouterr().out
     assert launched.count("launch:") == 1 and "seeds=[1,2]" in launched
