@@ -237,6 +237,28 @@ def test_damping_removes_the_cycle_on_a_noisy_plant(seed):
     assert damped[1][50:].mean() == pytest.approx(lam_star, rel=0.1)
 
 
+def test_a_stronger_integral_closes_the_offset_the_damped_pid_leaves():
+    """A flatter plant (k = 100, lambda* = 8.9), no noise, 50 updates (1M frames at one update
+    per 20 000-frame collect): with FSRL's ki the damped PID is nearly a P controller and the
+    cost stays far over the limit; with ki = 0.01 (benchmarks/lagrangian_dynamics.py
+    pid_ema_ki0.01) it overshoots once, then settles at lambda* with the cost just over d."""
+    plant = {"J0": 900.0, "k": 100.0}
+    lam_star = (plant["J0"] - LIMIT) / plant["k"]
+    weak_costs, _ = closed_loop(PIDLagrangian(0.05, 0.0005, 0.1, LIMIT, **DAMPED), 50, **plant)
+    costs, lams = closed_loop(PIDLagrangian(0.05, 0.01, 0.1, LIMIT, **DAMPED), 50, **plant)
+    assert weak_costs[25:].mean() > 5 * LIMIT
+    # First update, by hand: 0.05 * 44.5 + 0.01 * 890 + 0.1 * 44.5 (the integral's 8.9 alone
+    # is lambda*), so the plant stops until the EMAs and the delayed derivative let go.
+    assert lams[0] == pytest.approx(0.05 * 44.5 + 0.01 * 890 + 0.1 * 44.5, abs=1e-9)
+    assert (costs[1:12] == 0).all()
+    # Then over the limit but falling (monotonically from the 15th update), to within 20 % of
+    # it by update 50; lambda at lambda* and no longer moving.
+    assert (costs[12:] >= LIMIT).all() and (np.diff(costs[14:]) <= 1e-9).all()
+    assert costs[-1] <= 1.2 * LIMIT
+    assert np.abs(np.diff(lams[25:])).max() < 0.001
+    assert lams[25:].mean() == pytest.approx(lam_star, rel=0.01)
+
+
 def test_learned_lagrangian_on_the_plant_climbs_by_lr_and_settles():
     lr = 0.05
     costs, lams = closed_loop(LearnedLagrangian(LIMIT, lr=lr, lagrangian_init=0.0), 200, **PLANT)
