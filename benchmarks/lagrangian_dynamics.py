@@ -89,6 +89,8 @@ def setting_dir(runs_dir: Path, task: str, algo: str, setting: str) -> Path:
     if algo == "sac_lag":
         return (runs_dir / task / setting).resolve()
     return (runs_dir / task / algo / setting).resolve()
+
+
 METRICS = (
     "eval_cost_over_limit",
     "train_cost_over_limit",

@@ -2,7 +2,7 @@
 
     python benchmarks/multiseed_throughput.py [--frames 10000] [--ks 1 2 5] [--modes eager compiled]
         [--threads 1] [--task SafetyHalfCheetahVelocity-v1] [--frames-per-batch 10000]
-        [--out benchmarks/results/multiseed_throughput.json]
+        [--side-by-side 2] [--out benchmarks/results/multiseed_throughput.json]
     python benchmarks/multiseed_throughput.py --step-only [--ks 1 2 5 10] [--modes eager compiled]
 
 Whole recipe (default): for each mode, the single-seed recipe (``Trainer``, the baseline) and
@@ -12,6 +12,9 @@ process (its peak RSS is the memory reported), at ``experiment=paper`` settings.
 warm-up frames, evaluation time subtracted; env steps/s are summed over the seeds.
 ``--frames-per-batch`` (paper: 10 000, also the epoch) shortens the measured stretch on a busy
 machine; the update ratio (0.2 gradient steps per frame) and everything else stay the paper's.
+``--side-by-side N`` also runs N single-seed recipes at once, one thread each, in N processes
+(the usual way to use N cores for N seeds), and sums their env steps/s: the alternative to one
+multi-seed process that the multi-seed trainer has to beat.
 
 ``--step-only``: the gradient step alone (one batch of 256 per seed, 128x128 networks), the
 single-seed joint step against ``StackedSACLag.update`` for each K, and as a lower bound for
@@ -215,6 +218,10 @@ def main() -> None:
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument("--frames-per-batch", type=int, default=10_000)
     parser.add_argument("--step-only", action="store_true")
+    parser.add_argument(
+        "--side-by-side", type=int, default=0, metavar="N",
+        help="also run N single-seed recipes at once, one thread each",
+    )
     parser.add_argument("--one", nargs=2, metavar=("MODE", "K"), help=argparse.SUPPRESS)
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
@@ -234,13 +241,49 @@ def main() -> None:
         out = args.out or Path("benchmarks/results/multiseed_step.json")
         write_report(out, {"rows": rows})
         return
+    def child(mode: str, k: str, threads: int) -> list[str]:
+        return [sys.executable, __file__, "--one", mode, k, "--frames", str(args.frames),
+                "--threads", str(threads), "--task", args.task,
+                "--frames-per-batch", str(args.frames_per_batch)]
+
+    def row_of(stdout: str) -> dict:
+        return json.loads(next(line for line in stdout.splitlines() if line.startswith("ROW "))[4:])
+
     for mode in args.modes:
         for k in ["single", *map(str, args.ks)]:
-            cmd = [sys.executable, __file__, "--one", mode, k, "--frames", str(args.frames),
-                   "--threads", str(args.threads), "--task", args.task,
-                   "--frames-per-batch", str(args.frames_per_batch)]
-            out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
-            row = json.loads(next(line for line in out.splitlines() if line.startswith("ROW "))[4:])
+            out = subprocess.run(child(mode, k, args.threads), capture_output=True, text=True,
+                                 check=True).stdout
+            row = row_of(out)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+        if args.side_by_side:
+            # The same seed in each process: what is measured is the cost, not the trajectory.
+            procs = [subprocess.Popen(child(mode, "single", 1), stdout=subprocess.PIPE, text=True)
+                     for _ in range(args.side_by_side)]
+            runs = []
+            for proc in procs:
+                out, _ = proc.communicate()
+                if proc.returncode:
+                    raise subprocess.CalledProcessError(proc.returncode, proc.args)
+                runs.append(row_of(out))
+            row = {
+                "recipe": f"{args.side_by_side} single-seed Trainers side by side",
+                "mode": runs[0]["mode"],
+                "seeds": args.side_by_side,
+                "frames_measured_all_seeds": sum(r["frames_measured_all_seeds"] for r in runs),
+                # Each process times its own stretch; they run at once, so the rates add up.
+                "env_steps_per_s_all_seeds": round(
+                    sum(r["env_steps_per_s_all_seeds"] for r in runs), 1
+                ),
+                "env_steps_per_cpu_s_all_seeds": round(
+                    sum(r["frames_measured_all_seeds"] for r in runs)
+                    / sum(r["cpu_seconds"] for r in runs), 1
+                ),
+                "seconds_per_process": [r["seconds"] for r in runs],
+                "peak_rss_mb_per_process": [r["peak_rss_mb"] for r in runs],
+                "threads": 1,
+                "frames_per_batch": args.frames_per_batch,
+            }
             print(json.dumps(row), flush=True)
             rows.append(row)
     out = args.out or Path("benchmarks/results/multiseed_throughput.json")
