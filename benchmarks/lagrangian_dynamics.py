@@ -83,12 +83,15 @@ BASE_OVERRIDES = ["threads=1", "logger.progress_bar=false"]
 LAGRANGIAN_ALGOS = ("sac_lag", "s3rl")  # the off-policy SAC pair whose schedule this studies
 
 
+def algo_dir(root: Path, task: str, algo: str) -> Path:
+    """``<root>/<task>`` for SAC-Lag (the original layout), ``<root>/<task>/<algo>`` for any
+    other algo: the launcher's runs and the copied CSVs alike."""
+    return root / task if algo == "sac_lag" else root / task / algo
+
+
 def setting_dir(runs_dir: Path, task: str, algo: str, setting: str) -> Path:
-    """Where the launcher puts a group: ``<task>/<setting>`` for SAC-Lag (the original layout),
-    ``<task>/<algo>/<setting>`` for any other algo."""
-    if algo == "sac_lag":
-        return (runs_dir / task / setting).resolve()
-    return (runs_dir / task / algo / setting).resolve()
+    """Where the launcher puts a task, algo and setting's runs."""
+    return (algo_dir(runs_dir, task, algo) / setting).resolve()
 
 
 METRICS = (
@@ -265,9 +268,7 @@ def markdown(table: list[dict]) -> str:
 def copy_metrics(runs: list[dict], csv_dir: Path) -> None:
     for run in runs:
         slug = re.sub(r"[^A-Za-z0-9.]+", "_", run["setting"]).strip("_")
-        target = csv_dir / run["task"] / slug / f"seed{run['seed']}.csv"
-        if run["algo"] != "sac_lag":  # the launcher's algo keeps its original layout
-            target = csv_dir / run["task"] / run["algo"] / slug / f"seed{run['seed']}.csv"
+        target = algo_dir(csv_dir, run["task"], run["algo"]) / slug / f"seed{run['seed']}.csv"
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(Path(run["run_dir"]) / "metrics.csv", target)
 
