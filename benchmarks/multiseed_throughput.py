@@ -4,6 +4,8 @@
         [--threads 1] [--task SafetyHalfCheetahVelocity-v1] [--frames-per-batch 10000]
         [--side-by-side 2] [--out benchmarks/results/multiseed_throughput.json]
     python benchmarks/multiseed_throughput.py --step-only [--ks 1 2 5 10] [--modes eager compiled]
+    python benchmarks/multiseed_throughput.py --floor [--ks 1 5] [--threads 2] [--frames 4000]
+    python benchmarks/multiseed_throughput.py --breakdown [--ks 1 5] [--threads 2] [--frames 4000]
 
 Whole recipe (default): for each mode, the single-seed recipe (``Trainer``, the baseline) and
 the multi-seed recipe (``MultiSeedTrainer``, ``seeds=[...]``) with K seeds, each in a fresh
@@ -21,6 +23,19 @@ single-seed joint step against ``StackedSACLag.update`` for each K, and as a low
 K seeds the single-seed step on K x 256 rows (K seeds' FLOPs, one call's overhead), timed in
 interleaved rounds in one process (other processes' load hits every case alike), in wall and
 in process CPU time.
+
+``--floor``: how low K seeds' gradient steps can go on this CPU. It counts the matrix products
+of one single-seed gradient step (each call's shapes and FLOPs, torch's own FLOP formulas),
+times those products as plain ops for K seeds (each one K times larger along its batch
+dimension, as ``vmap`` over K seeds makes it), and measures the best GEMM rate torch reaches
+here (best of three shapes): K seeds' FLOPs at that rate is the floor of their products. It also
+runs the K = 1 ``MultiSeedTrainer`` recipe (compiled) and sets that floor against the target
+(K seeds in at most 2x the wall time of K = 1): what is left of the budget for everything else
+K seeds do, against what K = 1 spends on it.
+
+``--breakdown``: where a compiled ``MultiSeedTrainer`` run's wall time goes, for each K (fresh
+process each): collection, storing, sampling and stacking the batches, the batched update, the
+seeds' epoch ends (evaluation included), and the rest, over the measured stretch.
 """
 
 from __future__ import annotations
@@ -122,6 +137,8 @@ def measure_recipe(
         "cpu_seconds": round(cpu_seconds, 2),
         "env_steps_per_cpu_s_all_seeds": round(frames_measured / cpu_seconds, 1),
         "gradient_steps_per_seed": grad_steps,
+        # In the measured stretch (the warm-up's first batch of steps comes before it).
+        "gradient_steps_measured_per_seed": round((last - WARMUP) * cfg.algo.update_per_step),
         "warmup_seconds_incl_first_compile": round(t0 - start, 2),
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "replay_buffer_mb_at_capacity_per_seed": round(buffer_mb, 1),
@@ -209,6 +226,187 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     return rows
 
 
+# The parts of a multi-seed run --breakdown reports; "noise and stacking" is the gradient
+# step's own work besides sampling, the update and what follows it (drawing each seed's noise,
+# stacking the seeds' batches), "rest" what no part holds (the loop, progress, counters).
+BREAKDOWN_PARTS = ("collect", "store", "sample", "noise and stacking", "update", "after update",
+                   "epoch end", "rest")
+
+
+def measure_breakdown(task: str, frames: int, threads: int, k: int, batch: int) -> dict:
+    """One compiled ``MultiSeedTrainer`` run with k seeds, its measured stretch split in parts
+    (wall seconds), by wrapping the trainer's methods in timers."""
+    cfg = paper_config(task, frames, True, threads, [10 * (i + 1) for i in range(k)], batch)
+    spent = dict.fromkeys([*BREAKDOWN_PARTS, "gradient step"], 0.0)
+    start: dict[str, float] = {}
+
+    def timed(fn, part):
+        def wrapper(*args, **kwargs):
+            begin = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[part] += time.perf_counter() - begin
+        return wrapper
+
+    def timed_iterator(iterator_fn):
+        def iterator():
+            inner = iterator_fn()
+            while True:
+                begin = time.perf_counter()
+                item = next(inner, None)
+                spent["collect"] += time.perf_counter() - begin
+                if item is None:
+                    return
+                yield item
+        return iterator
+
+    with tempfile.TemporaryDirectory() as run_dir:
+        group = MultiSeedTrainer(cfg, run_dir)
+        last = group.members[-1]
+        for member in group.members:
+            member.replay_buffer.sample = timed(member.replay_buffer.sample, "sample")
+            member._store = timed(member._store, "store")
+            member._after_gradient_step = timed(member._after_gradient_step, "after update")
+
+            def make_collector(make=member._make_collector):
+                collector = make()
+                collector.iterator = timed_iterator(collector.iterator)
+                return collector
+
+            member._make_collector = make_collector
+            end_epoch = timed(member._end_epoch, "epoch end")
+
+            def end_epoch_and_mark(member=member, end_epoch=end_epoch):
+                end_epoch()
+                # The clock starts when the last seed has closed the warm-up's epoch.
+                if member is last and member.counters.frames == WARMUP:
+                    start.update(spent, clock=time.perf_counter())
+
+            member._end_epoch = end_epoch_and_mark
+        group.stacked.update = timed(group.stacked.update, "update")
+        group._gradient_step = timed(group._gradient_step, "gradient step")
+        group.run()
+        total = time.perf_counter() - start["clock"]
+    parts = {part: spent[part] - start[part] for part in spent}
+    gradient_step = parts.pop("gradient step")
+    parts["noise and stacking"] = gradient_step - sum(
+        parts[part] for part in ("sample", "update", "after update"))
+    parts["rest"] = total - sum(value for part, value in parts.items() if part != "rest")
+    steps = round((cfg.collector.total_frames - WARMUP) * cfg.algo.update_per_step)
+    return {
+        "seeds": k,
+        "threads": threads,
+        "frames_measured_per_seed": cfg.collector.total_frames - WARMUP,
+        "gradient_steps_measured": steps,
+        "wall_seconds": round(total, 2),
+        "wall_seconds_by_part": {part: round(parts[part], 2) for part in BREAKDOWN_PARTS},
+        "wall_ms_per_gradient_step_by_part": {
+            part: round(parts[part] / steps * 1e3, 2) for part in BREAKDOWN_PARTS
+        },
+    }
+
+
+def record_matmuls(task: str, threads: int) -> tuple[list[dict], float]:
+    """The matrix products of one single-seed gradient step at paper settings (eager): per
+    call the op and operand shapes, and the step's total FLOPs (torch's formulas)."""
+    import torch
+    from torch.utils._python_dispatch import TorchDispatchMode
+    from torch.utils.flop_counter import flop_registry
+
+    from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
+    from s3rl_torchrl.trainer.loop import seed_everything
+
+    torch.set_num_threads(threads)
+    cfg = paper_config(task, 0, False, threads, None, 10_000)
+    seed_everything(0)
+    env, _ = build_envs(cfg)
+    agent = build_agent(cfg, env, build_replay_buffer(cfg.algo), None)
+    batch = env.rollout(cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
+    batch = batch[: cfg.algo.batch_size]
+    matmuls = {"mm", "addmm", "bmm", "baddbmm"}
+
+    class Recorder(TorchDispatchMode):
+        def __init__(self):
+            super().__init__()
+            self.calls, self.flops = [], 0
+
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            kwargs = kwargs or {}
+            out = func(*args, **kwargs)
+            name = func._overloadpacket.__name__
+            count = flop_registry.get(func._overloadpacket)
+            if count is not None:
+                self.flops += count(*args, out_val=out, **kwargs)
+            if name in matmuls:
+                left, right = (args[1], args[2]) if name.startswith(("add", "badd")) else args[:2]
+                self.calls.append({"op": name, "left": list(left.shape),
+                                   "right": list(right.shape)})
+            return out
+
+    agent.update(batch)  # lazy initialisations happen outside the count
+    recorder = Recorder()
+    with recorder:
+        agent.update(batch)
+    return recorder.calls, recorder.flops
+
+
+def gemm_rate(shape: tuple[int, int, int], threads: int) -> float:
+    """GFLOP/s of one ``[m, k] x [k, n]`` product, median of 7 rounds."""
+    import torch
+
+    torch.set_num_threads(threads)
+    m, k, n = shape
+    a, b = torch.randn(m, k), torch.randn(k, n)
+    calls = max(5, int(2e9 / (2 * m * k * n)))  # ~2 GFLOP per round
+    times = interleaved_rounds({"gemm": lambda: a @ b}, calls=calls, rounds=7, warmup=3)["gemm"]
+    return 2 * m * k * n / (sorted(times)[3] / 1e6) / 1e9
+
+
+def measure_floor(ks: list[int], threads: int, task: str) -> tuple[list[dict], dict]:
+    """The step's matrix products for K seeds: counted, timed as plain ops at their own shapes
+    (each K times larger along its batch dimension, as ``vmap`` makes them), and the best GEMM
+    rate torch reaches here over three shapes (the step's main one, five times it, a large
+    square), the floor's rate: the step's skinnier products only run slower."""
+    import torch
+
+    calls, flops = record_matmuls(task, threads)
+    cases = {}
+    for k in ks:
+        operands = []
+        for call in calls:
+            left, right = call["left"], call["right"]
+            if len(left) == 2:  # mm / addmm: one product per seed (bmm under vmap)
+                shapes = ([k, *left], [k, *right]) if k > 1 else (left, right)
+            else:  # bmm / baddbmm (the critic ensembles): k times the batch
+                shapes = ([k * left[0], *left[1:]], [k * right[0], *right[1:]])
+            operands.append((torch.randn(shapes[0]), torch.randn(shapes[1])))
+
+        def products(operands=operands):
+            for a, b in operands:
+                torch.matmul(a, b)
+
+        cases[f"K={k}"] = products
+    wall = interleaved_rounds(cases, calls=20, rounds=7, warmup=5)
+    peak = {f"{m}x{k}x{n}": round(gemm_rate((m, k, n), threads), 1)
+            for m, k, n in [(256, 128, 128), (1280, 128, 128), (2048, 2048, 2048)]}
+    best = max(peak.values())
+    rows = []
+    for k in ks:
+        ms = sorted(wall[f"K={k}"])[3] / 1e3
+        rows.append({
+            "case": f"matrix products of {k} seed-steps, plain ops",
+            "seeds": k,
+            "matmul_calls_per_seed_step": len(calls),
+            "gflop_per_seed_step": round(flops / 1e9, 4),
+            "median_wall_ms_products_plain_ops": round(ms, 3),
+            "gflops_plain_ops": round(k * flops / 1e9 / (ms / 1e3), 1),
+            "ms_products_at_best_gemm_rate": round(k * flops / 1e9 / best * 1e3, 3),
+            "threads": threads,
+        })
+    return rows, {"gemm_gflops_by_shape": peak, "best_gemm_gflops": best}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=10_000)
@@ -218,6 +416,8 @@ def main() -> None:
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument("--frames-per-batch", type=int, default=10_000)
     parser.add_argument("--step-only", action="store_true")
+    parser.add_argument("--floor", action="store_true")
+    parser.add_argument("--breakdown", action="store_true")
     parser.add_argument(
         "--side-by-side", type=int, default=0, metavar="N",
         help="also run N single-seed recipes at once, one thread each",
@@ -227,6 +427,11 @@ def main() -> None:
     args = parser.parse_args()
     if args.one is not None:  # a child process: one run, its row on stdout
         mode, k = args.one
+        if mode == "breakdown":
+            row = measure_breakdown(args.task, args.frames, args.threads, int(k),
+                                    args.frames_per_batch)
+            print("ROW " + json.dumps(row), flush=True)
+            return
         k = None if k == "single" else int(k)
         compiled = mode == "compiled"
         row = measure_recipe(args.task, args.frames, compiled, args.threads, k, args.frames_per_batch)
@@ -248,6 +453,43 @@ def main() -> None:
 
     def row_of(stdout: str) -> dict:
         return json.loads(next(line for line in stdout.splitlines() if line.startswith("ROW "))[4:])
+
+    if args.breakdown:
+        rows = []
+        for k in args.ks:
+            row = row_of(subprocess.run(child("breakdown", str(k), args.threads),
+                                        capture_output=True, text=True, check=True).stdout)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+        out = args.out or Path("benchmarks/results/multiseed_breakdown.json")
+        write_report(out, {"rows": rows})
+        return
+    if args.floor:
+        rows, rates = measure_floor(args.ks, args.threads, args.task)
+        recipe = row_of(subprocess.run(child("compiled", "1", args.threads), capture_output=True,
+                                       text=True, check=True).stdout)
+        # Wall time per gradient step of the K = 1 recipe, everything included (collection,
+        # sampling, epoch ends; evaluation subtracted): the target allows K seeds twice that.
+        k1_ms = recipe["seconds"] / recipe["gradient_steps_measured_per_seed"] * 1e3
+        # The floor of the products: the step's FLOPs at the best GEMM rate this CPU reaches.
+        products = {row["seeds"]: row["ms_products_at_best_gemm_rate"] for row in rows}
+        summary = {
+            **rates,
+            "k1_recipe": recipe,
+            "k1_recipe_wall_ms_per_gradient_step": round(k1_ms, 3),
+            "k1_wall_ms_besides_products_floor": round(k1_ms - products.get(1, float("nan")), 3),
+        }
+        for k in args.ks:
+            if k > 1:
+                summary[f"k{k}_budget_ms_per_step_at_2x_k1"] = round(2 * k1_ms, 3)
+                summary[f"k{k}_budget_ms_left_besides_products_floor"] = round(
+                    2 * k1_ms - products[k], 3)
+        for row in rows:
+            print(json.dumps(row), flush=True)
+        print(json.dumps(summary), flush=True)
+        out = args.out or Path("benchmarks/results/multiseed_floor.json")
+        write_report(out, {"rows": rows, "summary": summary})
+        return
 
     for mode in args.modes:
         for k in ["single", *map(str, args.ks)]:
