@@ -20,35 +20,24 @@ from __future__ import annotations
 
 import argparse
 import copy
+import statistics
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import torch
 from _report import interleaved_rounds, write_report
-from multiseed_throughput import paper_config
+from multiseed_throughput import env_rows, paper_agents, paper_config
 from tensordict import TensorDict
 
 from s3rl_torchrl.envs.make import make_env
 from s3rl_torchrl.objectives.stacked import StackedSACLag, _normal_noise, draw_noise
-from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
-from s3rl_torchrl.trainer.loop import compile_loss, seed_everything
+from s3rl_torchrl.trainer.loop import compile_loss
 
 TASK = "SafetyHalfCheetahVelocity-v1"
 
 
-def build(seeds: int):
-    cfg = paper_config(TASK, 0, True, 2, None, 10_000)
-    agents, envs = [], []
-    for seed in range(seeds):
-        seed_everything(seed)
-        env, _ = build_envs(cfg)
-        envs.append(env)
-        agents.append(build_agent(cfg, env, build_replay_buffer(cfg.algo), None))
-    return cfg, agents, envs
-
-
-def step_cases(cfg, agents) -> dict:
-    batch = build_envs(cfg)[0].rollout(30).reshape(-1)[: cfg.algo.batch_size]
+def step_cases(cfg, agents, envs) -> dict:
+    batch = env_rows(cfg, envs[0], cfg.algo.batch_size)
     action_dim = batch["action"].shape[-1]
 
     def group(indices):
@@ -127,13 +116,14 @@ def main() -> None:
                         default=Path("benchmarks/results/multiseed_alternatives.json"))
     args = parser.parse_args()
     torch.set_num_threads(2)
-    cfg, agents, envs = build(args.seeds)
+    cfg = paper_config(TASK, 0, True, 2, None, 10_000)
+    agents, envs = map(list, zip(*paper_agents(cfg, args.seeds), strict=True))
     rows = []
-    for cases in (step_cases(cfg, agents), collection_cases(cfg, agents, envs)):
+    for cases in (step_cases(cfg, agents, envs), collection_cases(cfg, agents, envs)):
         times = interleaved_rounds(cases, calls=20, rounds=7, warmup=5)
         for name in cases:
             rows.append({"case": name, "seeds": args.seeds,
-                         "median_wall_ms": round(sorted(times[name])[3] / 1e3, 3),
+                         "median_wall_ms": round(statistics.median(times[name]) / 1e3, 3),
                          "min_wall_ms": round(min(times[name]) / 1e3, 3)})
             print(rows[-1], flush=True)
         torch.set_num_threads(2)

@@ -43,6 +43,7 @@ from __future__ import annotations
 import argparse
 import json
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -88,11 +89,37 @@ def paper_config(
     return cfg
 
 
+def group_seeds(k: int) -> list[int]:
+    """The seeds of a k-seed group: 10, 20, ... (the paper's Table 3 uses 10-50)."""
+    return [10 * (i + 1) for i in range(k)]
+
+
+def paper_agents(cfg, count: int, compile_first=None) -> list[tuple]:
+    """``count`` (agent, training env) pairs built as the trainer builds them, agent ``i`` from
+    seed ``i``; ``compile_first`` compiles the first agent's update (the recipe's own step)."""
+    from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
+    from s3rl_torchrl.trainer.loop import seed_everything
+
+    built = []
+    for index in range(count):
+        seed_everything(index)
+        env, _ = build_envs(cfg)
+        compile_fn = compile_first if index == 0 else None
+        built.append((build_agent(cfg, env, build_replay_buffer(cfg.algo), compile_fn), env))
+    return built
+
+
+def env_rows(cfg, env, rows: int):
+    """``rows`` transitions of a short rollout of ``env``, flattened like a replay sample."""
+    steps = rows // cfg.collector.num_envs + 1
+    return env.rollout(steps).reshape(-1)[:rows]
+
+
 def measure_recipe(
     task: str, frames: int, compiled: bool, threads: int, k: int | None, batch: int
 ) -> dict:
     """One run; ``k=None``: the single-seed recipe, else ``MultiSeedTrainer`` with k seeds."""
-    seeds = None if k is None else [10 * (i + 1) for i in range(k)]
+    seeds = None if k is None else group_seeds(k)
     cfg = paper_config(task, frames, compiled, threads, seeds, batch)
     marks: dict[int, list[tuple[float, float]]] = {}  # frames -> [(time, eval seconds)]
 
@@ -152,21 +179,15 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     import torch
 
     from s3rl_torchrl.objectives.stacked import StackedSACLag, draw_noise
-    from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
-    from s3rl_torchrl.trainer.loop import compile_loss, seed_everything
+    from s3rl_torchrl.trainer.loop import compile_loss
 
     torch.set_num_threads(threads)
     cfg = paper_config(task, 0, compiled, threads, None, 10_000)
-    agents = []
-    for k in range(max(ks)):
-        seed_everything(k)
-        env, _ = build_envs(cfg)
-        # Agent 0 is the baseline: built as the single-seed Trainer builds it, so its
-        # ``update`` is the recipe's own joint step (compiled like the recipe's when compiled).
-        compile_fn = compile_loss if compiled and k == 0 else None
-        agents.append(build_agent(cfg, env, build_replay_buffer(cfg.algo), compile_fn))
-    data = env.rollout(cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
-    batch = data[: cfg.algo.batch_size]
+    # Agent 0 is the baseline: built as the single-seed Trainer builds it, so its ``update`` is
+    # the recipe's own joint step (compiled like the recipe's when compiled).
+    built = paper_agents(cfg, max(ks), compile_loss if compiled else None)
+    agents, env = [agent for agent, _ in built], built[-1][1]
+    batch = env_rows(cfg, env, cfg.algo.batch_size)
     action_dim = env.action_spec.shape[-1]
     wrap = compile_loss if compiled else None
 
@@ -178,7 +199,7 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     cases = {"single-seed step": single_step}
     # A lower bound for K agents in one step: ONE agent on K x 256 rows does the FLOPs of K
     # agents with the per-call overhead of one (how far batching over seeds can go at best).
-    big = env.rollout(max(ks) * cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
+    big = env_rows(cfg, env, max(ks) * cfg.algo.batch_size)
     for k in ks:
         if k > 1:
             rows = big[: k * cfg.algo.batch_size]
@@ -202,10 +223,7 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     # The same, in process CPU time: what the step costs, whatever else holds the cores.
     cpu = interleaved_rounds(cases, calls=20, rounds=7, warmup=0, clock=time.process_time)
     rows = []
-
-    def median(values):
-        return sorted(values)[len(values) // 2]
-
+    median = statistics.median
     base_wall, base_cpu = median(wall["single-seed step"]), median(cpu["single-seed step"])
     for name in cases:
         seeds = int(name.split("K=")[1]) if "K=" in name else 1
@@ -236,7 +254,7 @@ BREAKDOWN_PARTS = ("collect", "store", "sample", "noise and stacking", "update",
 def measure_breakdown(task: str, frames: int, threads: int, k: int, batch: int) -> dict:
     """One compiled ``MultiSeedTrainer`` run with k seeds, its measured stretch split in parts
     (wall seconds), by wrapping the trainer's methods in timers."""
-    cfg = paper_config(task, frames, True, threads, [10 * (i + 1) for i in range(k)], batch)
+    cfg = paper_config(task, frames, True, threads, group_seeds(k), batch)
     spent = dict.fromkeys([*BREAKDOWN_PARTS, "gradient step"], 0.0)
     start: dict[str, float] = {}
 
@@ -314,16 +332,10 @@ def record_matmuls(task: str, threads: int) -> tuple[list[dict], float]:
     from torch.utils._python_dispatch import TorchDispatchMode
     from torch.utils.flop_counter import flop_registry
 
-    from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
-    from s3rl_torchrl.trainer.loop import seed_everything
-
     torch.set_num_threads(threads)
     cfg = paper_config(task, 0, False, threads, None, 10_000)
-    seed_everything(0)
-    env, _ = build_envs(cfg)
-    agent = build_agent(cfg, env, build_replay_buffer(cfg.algo), None)
-    batch = env.rollout(cfg.algo.batch_size // cfg.collector.num_envs + 1).reshape(-1)
-    batch = batch[: cfg.algo.batch_size]
+    [(agent, env)] = paper_agents(cfg, 1)
+    batch = env_rows(cfg, env, cfg.algo.batch_size)
     matmuls = {"mm", "addmm", "bmm", "baddbmm"}
 
     class Recorder(TorchDispatchMode):
@@ -360,7 +372,7 @@ def gemm_rate(shape: tuple[int, int, int], threads: int) -> float:
     a, b = torch.randn(m, k), torch.randn(k, n)
     calls = max(5, int(2e9 / (2 * m * k * n)))  # ~2 GFLOP per round
     times = interleaved_rounds({"gemm": lambda: a @ b}, calls=calls, rounds=7, warmup=3)["gemm"]
-    return 2 * m * k * n / (sorted(times)[3] / 1e6) / 1e9
+    return 2 * m * k * n / (statistics.median(times) / 1e6) / 1e9
 
 
 def measure_floor(ks: list[int], threads: int, task: str) -> tuple[list[dict], dict]:
@@ -393,7 +405,7 @@ def measure_floor(ks: list[int], threads: int, task: str) -> tuple[list[dict], d
     best = max(peak.values())
     rows = []
     for k in ks:
-        ms = sorted(wall[f"K={k}"])[3] / 1e3
+        ms = statistics.median(wall[f"K={k}"]) / 1e3
         rows.append({
             "case": f"matrix products of {k} seed-steps, plain ops",
             "seeds": k,
