@@ -58,6 +58,11 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import write_report  # noqa: E402
 
+STEP = [
+    "algo.lagrangian_cadence=step",
+    "algo.lagrangian_window=20",
+    "algo.lagrangian_warmup_frames=${collector.init_random_frames}",
+]
 # Controller settings of the comparison, as s3rl-train overrides on top of
 # experiment=paper (--experiment) algo=sac_lag (--algo); frames_per_epoch stays the experiment's.
 SETTINGS: dict[str, list[str]] = {
@@ -78,6 +83,15 @@ SETTINGS: dict[str, list[str]] = {
     # update at an error of 50, so over 15-50 updates pid_ema is a P controller whose cost
     # settles at lambda / kp above the limit; a larger ki is what can close that offset.
     "pid_ema_ki0.01": ["pid=ema", "algo.pid.ki=0.01"],
+    # OmniSafe's cadence (algo.lagrangian_cadence=step): lambda moves after every gradient step,
+    # from the mean cost of the last 20 finished training episodes (one FSRL collect's worth),
+    # frozen while the collector still acts at random (the first collect). Rates and gains are
+    # per gradient step; the selection sweep of docs/results.md ("Holding the limit").
+    "step_learned_lr1e-4": ["algo.lagrangian=learned", "algo.lagrangian_lr=0.0001", *STEP],
+    "step_learned_lr3e-4": ["algo.lagrangian=learned", "algo.lagrangian_lr=0.0003", *STEP],
+    # OmniSafe's SACPID (configs/pid/omnisafe.yaml) with its integral gain per env step (1e-7)
+    # scaled to the paper's 0.2 gradient steps per env step: the same lambda per frame.
+    "step_pid_omnisafe": ["pid=omnisafe", "algo.pid.ki=5e-7", *STEP],
 }
 BASE_OVERRIDES = ["threads=1", "logger.progress_bar=false"]
 LAGRANGIAN_ALGOS = ("sac_lag", "s3rl")  # the off-policy SAC pair whose schedule this studies
@@ -166,6 +180,11 @@ def setting_name(config: dict) -> str:
         name = f"learned(lr={algo['lagrangian_lr']})"
     else:
         name = kind
+    if algo.get("lagrangian_cadence", "collect") == "step":  # runs before the option: collect
+        name += (
+            f" step(window={algo['lagrangian_window']},"
+            f"warmup={algo['lagrangian_warmup_frames']})"
+        )
     return f"{name} batch={collector['frames_per_batch']}"
 
 

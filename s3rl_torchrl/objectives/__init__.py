@@ -12,7 +12,10 @@ from s3rl_torchrl.objectives.infonce import (  # noqa: F401
     infonce_loss,
 )
 from s3rl_torchrl.objectives.lagrangian import (  # noqa: F401
+    LAGRANGIAN_CADENCES,
+    EpisodeCostWindow,
     LagrangianController,
+    LagrangianUpdater,
     LearnedLagrangian,
     PIDLagrangian,
 )

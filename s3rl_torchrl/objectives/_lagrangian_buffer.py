@@ -7,6 +7,7 @@ new value).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -25,10 +26,22 @@ class LagrangianBufferMixin:
     def set_lagrangian(self, value: float | Sequence[float] | Tensor) -> None:
         """Set the multipliers in place: a number (same for every cost) or ``num_costs`` values."""
         buffer = self._buffers["lagrangian"]
-        if isinstance(value, Tensor):
-            value = value.detach().to(device=buffer.device, dtype=buffer.dtype)
-        else:
-            value = torch.as_tensor(value, dtype=buffer.dtype, device=buffer.device)
+        if not isinstance(value, Tensor):
+            # Numbers are checked in Python: a per-step controller sets lambda after every
+            # gradient step, and tensor checks would cost ~25 us of it.
+            values = [float(value)] * self.num_costs if isinstance(value, int | float) else [
+                float(v) for v in value
+            ]
+            if len(values) != self.num_costs:
+                raise ValueError(
+                    f"lagrangian must be a number or {self.num_costs} values (one per cost), "
+                    f"got {len(values)} values."
+                )
+            if not all(math.isfinite(v) and v >= 0 for v in values):
+                raise ValueError(f"lagrangian must be finite and >= 0, got {values}.")
+            buffer.copy_(torch.tensor(values, dtype=buffer.dtype))
+            return
+        value = value.detach().to(device=buffer.device, dtype=buffer.dtype)
         if value.ndim == 0:
             value = value.expand(self.num_costs)
         if value.shape != buffer.shape:

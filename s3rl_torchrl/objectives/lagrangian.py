@@ -1,55 +1,71 @@
-"""Lagrange multiplier controllers for m cost constraints ``J_i <= d_i``.
+"""Lagrange multiplier controllers for m cost constraints ``J_i <= d_i``, and when they update.
 
-Each controller is a small ``nn.Module`` whose state lives in buffers (so ``state_dict`` /
-``load_state_dict`` checkpoint it) with one method that matters::
+Each controller is a small ``nn.Module`` (``state_dict`` / ``load_state_dict`` checkpoint it)
+with one method that matters::
 
-    lam = controller.update(mean_episode_cost)   # once per collect, before the gradient steps
+    lam = controller.update(mean_episode_cost)   # J: the mean episode cost (m values)
     loss.lagrangian = lam                        # SACLagLoss reads it in the actor loss
-
-``mean_episode_cost`` is the mean undiscounted episode cost ``J`` of the training episodes just
-collected: a number for one cost, or ``m`` values.
 
 - :class:`PIDLagrangian`: Stooke et al. (2020) in FSRL's form by default, with the rlpyt/OmniSafe
   variants behind flags.
 - :class:`LearnedLagrangian`: gradient ascent on ``lambda * (J - d)`` with Adam, clamped at 0
   (OmniSafe's SACLag).
+
+How often ``update`` runs and from which episodes is :class:`LagrangianUpdater`'s business:
+
+- ``cadence="collect"`` (FSRL, the paper): once per collected batch in which episodes ended,
+  from the mean cost of those episodes, before that batch's gradient steps;
+- ``cadence="step"`` (OmniSafe): after every gradient step, from the mean cost of the last
+  ``window`` finished training episodes (:class:`EpisodeCostWindow`).
+
+Both cadences keep lambda at its initial value until more than ``warmup_frames`` frames have
+been collected. The controllers' state is a handful of Python floats (checkpointed as the
+modules' extra state): a per-step update then costs microseconds, where the same arithmetic on
+one-element tensors cost 0.13 ms (PID) and 0.36 ms (Adam through ``torch.optim``) per call,
+1-4% of a gradient step (docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
-import copy
 import math
+from collections import deque
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import torch
 from torch import Tensor, nn
 
-__all__ = ["LagrangianController", "LearnedLagrangian", "PIDLagrangian"]
+__all__ = [
+    "LAGRANGIAN_CADENCES",
+    "EpisodeCostWindow",
+    "LagrangianController",
+    "LagrangianUpdater",
+    "LearnedLagrangian",
+    "PIDLagrangian",
+]
 
 _HISTORY_INIT_CHOICES = ("limit", "zero")
+LAGRANGIAN_CADENCES = ("collect", "step")
 
 
-def _as_vector(value, name: str, num: int | None = None) -> Tensor:
-    """``value`` as a float64 vector of ``num`` entries (a number is broadcast when ``num`` set)."""
+def _as_floats(value, name: str, num: int | None = None) -> list[float]:
+    """``value`` as a list of ``num`` floats (a number is broadcast when ``num`` is set)."""
     if isinstance(value, Tensor):
-        tensor = value.detach().to(dtype=torch.float64, device="cpu")
+        value = value.detach().reshape(-1).tolist() if value.ndim else value.item()
+    if isinstance(value, int | float):
+        values = [float(value)] * (1 if num is None else num)
     else:
         try:
-            tensor = torch.as_tensor(value, dtype=torch.float64)
-        except (TypeError, ValueError, RuntimeError) as err:
+            values = [float(v) for v in value]
+        except (TypeError, ValueError) as err:
             raise TypeError(
                 f"{name} must be a number or a sequence of numbers, got {value!r}."
             ) from err
-    if tensor.ndim == 0:
-        tensor = tensor.reshape(1) if num is None else tensor.expand(num).clone()
-    if tensor.ndim != 1 or tensor.numel() == 0:
-        raise ValueError(
-            f"{name} must be a number or a 1-D sequence, got shape {tuple(tensor.shape)}."
-        )
-    if num is not None and tensor.numel() != num:
-        raise ValueError(f"{name} has {tensor.numel()} entries, expected {num} (one per cost).")
-    return tensor
+        if not values:
+            raise ValueError(f"{name} must be a number or a non-empty 1-D sequence, got [].")
+    if num is not None and len(values) != num:
+        raise ValueError(f"{name} has {len(values)} entries, expected {num} (one per cost).")
+    return values
 
 
 def _check_gain(name: str, value: float) -> float:
@@ -59,11 +75,25 @@ def _check_gain(name: str, value: float) -> float:
     return value
 
 
+def _check_init(values: list[float]) -> list[float]:
+    if not all(math.isfinite(v) and v >= 0 for v in values):
+        raise ValueError(f"lagrangian_init must be finite and >= 0, got {values}.")
+    return values
+
+
+def _tensor(values: list[float]) -> Tensor:
+    return torch.tensor(values, dtype=torch.float64)
+
+
 class LagrangianController(nn.Module):
     """Base class: per-cost limits ``cost_limit`` ([m]) and the current multipliers.
 
-    Subclasses implement :meth:`_update` (float64 ``J`` of shape ``[m]`` -> new multipliers).
+    Subclasses keep their state in Python floats, name it in ``_state_names`` (what
+    ``state_dict`` saves) and implement :meth:`_update` (``J`` as ``m`` floats -> the new
+    multipliers as ``m`` floats).
     """
+
+    _state_names: tuple[str, ...] = ()
 
     def __init__(self, cost_limit: float | Sequence[float] | Tensor, num_costs: int | None = None):
         super().__init__()
@@ -71,22 +101,27 @@ class LagrangianController(nn.Module):
             isinstance(num_costs, bool) or not isinstance(num_costs, int) or num_costs < 1
         ):
             raise ValueError(f"num_costs must be an integer >= 1, got {num_costs!r}.")
-        limit = _as_vector(cost_limit, "cost_limit", num_costs)
-        if not bool(torch.isfinite(limit).all()) or bool((limit < 0).any()):
+        limit = _as_floats(cost_limit, "cost_limit", num_costs)
+        if not all(math.isfinite(v) and v >= 0 for v in limit):
             raise ValueError(
-                f"cost_limit must be finite and >= 0 (a per-episode cost budget), got "
-                f"{limit.tolist()}."
+                f"cost_limit must be finite and >= 0 (a per-episode cost budget), got {limit}."
             )
-        self.num_costs = limit.numel()
-        self.register_buffer("cost_limit", limit)
-        self.register_buffer("num_updates", torch.zeros((), dtype=torch.long))
+        self.num_costs = len(limit)
+        self._cost_limit = limit
+        self._lagrangian = [0.0] * self.num_costs
+        self.num_updates = 0
+
+    @property
+    def cost_limit(self) -> Tensor:
+        """Per-episode cost limits ``d``, shape ``[m]`` (float64)."""
+        return _tensor(self._cost_limit)
 
     @property
     def lagrangian(self) -> Tensor:
         """Current multipliers, shape ``[m]`` (float64; ``SACLagLoss`` converts on assignment)."""
-        raise NotImplementedError
+        return _tensor(self._lagrangian)
 
-    def _update(self, cost: Tensor) -> Tensor:
+    def _update(self, cost: list[float]) -> list[float]:
         raise NotImplementedError
 
     def update(self, mean_episode_cost: float | Sequence[float] | Tensor) -> Tensor:
@@ -95,23 +130,41 @@ class LagrangianController(nn.Module):
         Raises ``ValueError`` on a NaN/inf cost (e.g. a collect in which no episode finished:
         skip the update then).
         """
-        cost = _as_vector(mean_episode_cost, "mean_episode_cost")
-        if cost.numel() != self.num_costs:
+        return _tensor(self.update_floats(_as_floats(mean_episode_cost, "mean_episode_cost")))
+
+    def update_floats(self, mean_episode_cost: list[float]) -> list[float]:
+        """:meth:`update` on a list of ``m`` floats, returning floats: the per-step path, without
+        the tensor conversions (a few microseconds)."""
+        cost = mean_episode_cost
+        if len(cost) != self.num_costs:
             raise ValueError(
-                f"mean_episode_cost has {cost.numel()} entries but the controller has "
+                f"mean_episode_cost has {len(cost)} entries but the controller has "
                 f"{self.num_costs} cost limit(s)."
             )
-        if not bool(torch.isfinite(cost).all()):
+        if not all(math.isfinite(c) for c in cost):
             raise ValueError(
-                f"mean_episode_cost must be finite, got {cost.tolist()} (no finished episode? "
-                "skip the update)."
+                f"mean_episode_cost must be finite, got {cost} (no finished episode? skip the "
+                "update)."
             )
-        lam = self._update(cost)
+        self._lagrangian = self._update(cost)
         self.num_updates += 1
-        return lam.detach().clone()
+        return list(self._lagrangian)
+
+    # Checkpoints: the floats as the module's extra state (plain lists: weights_only loads them).
+    def get_extra_state(self) -> dict[str, Any]:
+        names = ("_lagrangian", "num_updates", *self._state_names)
+        return {name: _copy(getattr(self, name)) for name in names}
+
+    def set_extra_state(self, state: dict[str, Any]) -> None:
+        for name, value in state.items():
+            setattr(self, name, _copy(value))
 
     def extra_repr(self) -> str:
-        return f"num_costs={self.num_costs}, cost_limit={self.cost_limit.tolist()}"
+        return f"num_costs={self.num_costs}, cost_limit={self._cost_limit}"
+
+
+def _copy(value):
+    return [_copy(v) for v in value] if isinstance(value, list | tuple) else value
 
 
 class PIDLagrangian(LagrangianController):
@@ -133,6 +186,10 @@ class PIDLagrangian(LagrangianController):
     derivative_history_init="zero"`` (+ ``penalty_max=100``, which OmniSafe applies only
     without its ``sum_norm``/``diff_norm``).
 
+    The gains are per update: once per collect (FSRL: 0.05, 0.0005, 0.1) they mean something
+    else than after every gradient step (OmniSafe's SACPID: 1e-6, 1e-7, 1e-7), see
+    ``docs/objectives.md``.
+
     Args:
         kp, ki, kd: gains (paper/FSRL: 0.05, 0.0005, 0.1).
         cost_limit: per-episode cost limit ``d``: a number or one per cost.
@@ -150,6 +207,8 @@ class PIDLagrangian(LagrangianController):
             ``lagrangian_multiplier_init``) and is what :attr:`lagrangian` returns before the
             first update.
     """
+
+    _state_names = ("integral", "error", "smoothed_cost", "cost_history")
 
     def __init__(
         self,
@@ -195,50 +254,47 @@ class PIDLagrangian(LagrangianController):
         self.penalty_max = None if penalty_max is None else float(penalty_max)
 
         m = self.num_costs
-        init = _as_vector(lagrangian_init, "lagrangian_init", m)
-        if bool((init < 0).any()) or not bool(torch.isfinite(init).all()):
-            raise ValueError(f"lagrangian_init must be finite and >= 0, got {init.tolist()}.")
+        init = _check_init(_as_floats(lagrangian_init, "lagrangian_init", m))
         if self.ki_inside_integral:
-            integral = init.clone()
-        elif bool((init > 0).any()):
+            integral = list(init)
+        elif any(v > 0 for v in init):
             if self.ki == 0:
                 raise ValueError("lagrangian_init > 0 needs ki > 0 (it seeds the integral term).")
-            integral = init / self.ki
+            integral = [v / self.ki for v in init]
         else:
-            integral = torch.zeros(m, dtype=torch.float64)
-        history = self.cost_limit if derivative_history_init == "limit" else torch.zeros(m)
-        # State in float64: the integral sums thousands of updates.
-        self.register_buffer("integral", integral)
-        self.register_buffer("error", torch.zeros(m, dtype=torch.float64))
-        self.register_buffer("smoothed_cost", history.clone().to(torch.float64))
-        self.register_buffer(
-            "cost_history", history.to(torch.float64).expand(derivative_delay, m).clone()
-        )
-        self.register_buffer("_lagrangian", init.clone())
+            integral = [0.0] * m
+        history = self._cost_limit if derivative_history_init == "limit" else [0.0] * m
+        self.integral = integral
+        self.error = [0.0] * m
+        self.smoothed_cost = list(history)
+        # Oldest first: the derivative compares with cost_history[0].
+        self.cost_history = [list(history) for _ in range(derivative_delay)]
+        self._lagrangian = list(init)
 
-    @property
-    def lagrangian(self) -> Tensor:
-        return self._lagrangian.clone()
-
-    def _update(self, cost: Tensor) -> Tensor:
-        e = cost - self.cost_limit
-        self.error.mul_(self.error_ema).add_((1.0 - self.error_ema) * e)
-        if self.ki_inside_integral:
-            self.integral.copy_((self.integral + self.ki * e).clamp_min(0.0))
-            i_term = self.integral
-        else:
-            self.integral.copy_((self.integral + e).clamp_min(0.0))
-            i_term = self.ki * self.integral
-        if self.cost_ema == 0.0:
-            self.smoothed_cost.copy_(cost)
-        else:
-            self.smoothed_cost.mul_(self.cost_ema).add_((1.0 - self.cost_ema) * cost)
-        derivative = (self.smoothed_cost - self.cost_history[0]).clamp_min(0.0)
-        self.cost_history.copy_(torch.cat([self.cost_history[1:], self.smoothed_cost[None]], 0))
-        lam = (self.kp * self.error + i_term + self.kd * derivative).clamp_min(0.0)
-        if self.penalty_max is not None:
-            lam = lam.clamp_max(self.penalty_max)
-        self._lagrangian.copy_(lam)
+    def _update(self, cost: list[float]) -> list[float]:
+        lam = []
+        newest = []
+        for i, (j, d) in enumerate(zip(cost, self._cost_limit)):
+            e = j - d
+            self.error[i] = self.error_ema * self.error[i] + (1.0 - self.error_ema) * e
+            if self.ki_inside_integral:
+                self.integral[i] = max(0.0, self.integral[i] + self.ki * e)
+                i_term = self.integral[i]
+            else:
+                self.integral[i] = max(0.0, self.integral[i] + e)
+                i_term = self.ki * self.integral[i]
+            if self.cost_ema == 0.0:
+                self.smoothed_cost[i] = j
+            else:
+                self.smoothed_cost[i] = self.cost_ema * self.smoothed_cost[i] + (
+                    1.0 - self.cost_ema
+                ) * j
+            derivative = max(0.0, self.smoothed_cost[i] - self.cost_history[0][i])
+            newest.append(self.smoothed_cost[i])
+            value = max(0.0, self.kp * self.error[i] + i_term + self.kd * derivative)
+            lam.append(value if self.penalty_max is None else min(value, self.penalty_max))
+        self.cost_history.pop(0)
+        self.cost_history.append(newest)
         return lam
 
     def extra_repr(self) -> str:
@@ -254,19 +310,24 @@ class LearnedLagrangian(LagrangianController):
     """Lambda learned by gradient ascent on ``lambda * (J - d)`` with Adam, clamped to
     ``[0, upper_bound]`` (OmniSafe's ``Lagrange``, used by its SACLag).
 
-    Each :meth:`update` is one Adam step on ``-sum_i lambda_i (J_i - d_i)``. The Adam state is
-    part of ``state_dict``.
+    Each :meth:`update` is one Adam step (``torch.optim.Adam``'s update, written out for a
+    handful of floats: the same numbers up to float32 rounding, tests/objectives) on the loss
+    ``-sum_i lambda_i (J_i - d_i)``, whose gradient is ``-(J_i - d_i)``. With an error of
+    constant sign Adam moves lambda by ``lr`` per update whatever its size, so ``lr`` is a rate
+    per update: OmniSafe's SACLag uses 1e-5 per gradient step (``cadence="step"``).
 
     Args:
         cost_limit: per-episode cost limit ``d``: a number or one per cost.
 
     Keyword Args:
         num_costs: number of costs ``m`` (broadcasts a scalar ``cost_limit``).
-        lr: Adam learning rate (OmniSafe SACLag: 0.001).
+        lr: Adam learning rate.
         lagrangian_init: initial lambda (OmniSafe: 0.001).
         upper_bound: optional upper clamp.
         betas, eps: Adam's.
     """
+
+    _state_names = ("adam_step", "adam_mean", "adam_square")
 
     def __init__(
         self,
@@ -284,36 +345,172 @@ class LearnedLagrangian(LagrangianController):
             raise ValueError(f"lr must be a finite number > 0, got {lr!r}.")
         if upper_bound is not None and not float(upper_bound) > 0:
             raise ValueError(f"upper_bound must be > 0 or None, got {upper_bound!r}.")
-        init = _as_vector(lagrangian_init, "lagrangian_init", self.num_costs)
-        if bool((init < 0).any()) or not bool(torch.isfinite(init).all()):
-            raise ValueError(f"lagrangian_init must be finite and >= 0, got {init.tolist()}.")
+        if not all(0.0 <= float(b) < 1.0 for b in betas) or not float(eps) > 0:
+            raise ValueError(f"betas must be in [0, 1) and eps > 0, got {betas!r}, {eps!r}.")
+        self.lr = float(lr)
         self.upper_bound = None if upper_bound is None else float(upper_bound)
-        self.multiplier = nn.Parameter(init.to(torch.float32))
-        self.optimizer = torch.optim.Adam([self.multiplier], lr=float(lr), betas=betas, eps=eps)
+        self.betas = (float(betas[0]), float(betas[1]))
+        self.eps = float(eps)
+        m = self.num_costs
+        self._lagrangian = _check_init(_as_floats(lagrangian_init, "lagrangian_init", m))
+        self.adam_step = 0
+        self.adam_mean = [0.0] * m
+        self.adam_square = [0.0] * m
+
+    @property
+    def multiplier(self) -> Tensor:
+        """The learned multipliers (the same values as :attr:`lagrangian`)."""
+        return self.lagrangian
+
+    def _update(self, cost: list[float]) -> list[float]:
+        beta1, beta2 = self.betas
+        self.adam_step += 1
+        correction1 = 1.0 - beta1**self.adam_step
+        correction2 = math.sqrt(1.0 - beta2**self.adam_step)
+        upper = math.inf if self.upper_bound is None else self.upper_bound
+        lam = []
+        for i, (j, d) in enumerate(zip(cost, self._cost_limit)):
+            grad = d - j  # of -lambda (J - d)
+            mean = self.adam_mean[i] = beta1 * self.adam_mean[i] + (1.0 - beta1) * grad
+            square = self.adam_square[i] = beta2 * self.adam_square[i] + (1.0 - beta2) * grad**2
+            step = self.lr / correction1 * mean / (math.sqrt(square) / correction2 + self.eps)
+            lam.append(min(max(self._lagrangian[i] - step, 0.0), upper))
+        return lam
+
+    def extra_repr(self) -> str:
+        return f"{super().extra_repr()}, lr={self.lr}, upper_bound={self.upper_bound}"
+
+
+class EpisodeCostWindow(nn.Module):
+    """The costs of the last ``size`` finished episodes and their mean (OmniSafe's
+    ``window_lens``): what a per-step controller is fed. Checkpointed as extra state."""
+
+    def __init__(self, size: int, num_costs: int = 1):
+        super().__init__()
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ValueError(f"window size must be an integer >= 1, got {size!r}.")
+        self.size, self.num_costs = size, num_costs
+        self._costs: deque[list[float]] = deque(maxlen=size)
+        self._mean: list[float] | None = None
+
+    def __len__(self) -> int:
+        return len(self._costs)
+
+    def extend(self, episode_costs: Tensor | Sequence) -> None:
+        """Add finished episodes' costs, oldest first: ``[episodes, m]`` (or ``[episodes]``)."""
+        if isinstance(episode_costs, Tensor):
+            episode_costs = episode_costs.detach().reshape(-1, self.num_costs).tolist()
+        rows = [_as_floats(row, "episode cost", self.num_costs) for row in episode_costs]
+        if not rows:
+            return
+        self._costs.extend(rows)
+        count = len(self._costs)
+        self._mean = [sum(column) / count for column in zip(*self._costs)]
+
+    def mean(self) -> list[float] | None:
+        """Mean cost per cost signal over the window, ``None`` before any episode ended."""
+        return None if self._mean is None else list(self._mean)
+
+    def get_extra_state(self) -> dict[str, Any]:
+        return {"costs": [list(row) for row in self._costs]}
+
+    def set_extra_state(self, state: dict[str, Any]) -> None:
+        self._costs.clear()
+        self._mean = None
+        self.extend(state["costs"])
+
+    def extra_repr(self) -> str:
+        return f"size={self.size}, num_costs={self.num_costs}"
+
+
+class LagrangianUpdater(nn.Module):
+    """When a controller updates lambda, from which episodes, and where lambda goes.
+
+    Call :meth:`observe` once per collected batch with the costs of the training episodes that
+    ended in it, and :meth:`after_gradient_step` after each gradient step; lambda is written in
+    place into ``loss.lagrangian`` (a buffer, so a compiled loss reads the new value without
+    recompiling).
+
+    Args:
+        controller: a :class:`LagrangianController`.
+        loss: a loss with a ``lagrangian`` buffer (``SACLagLoss``, ``DDPGLagLoss``, ...).
+
+    Keyword Args:
+        cadence: ``"collect"`` (FSRL, the paper: one update per batch in which episodes ended,
+            from their mean cost) or ``"step"`` (OmniSafe: one update after every gradient step,
+            from the mean cost of the last ``window`` finished episodes).
+        window: episodes in the running window (``cadence="step"`` only).
+        warmup_frames: lambda keeps its initial value until more than this many frames have
+            been collected (OmniSafe's ``warmup_epochs`` x ``steps_per_epoch``).
+
+    ``state_dict`` holds the controller's state and the window.
+    """
+
+    def __init__(
+        self,
+        controller: LagrangianController,
+        loss: nn.Module,
+        *,
+        cadence: Literal["collect", "step"] = "collect",
+        window: int = 10,
+        warmup_frames: int = 0,
+    ):
+        super().__init__()
+        if cadence not in LAGRANGIAN_CADENCES:
+            raise ValueError(
+                f"Unknown cadence {cadence!r}; valid choices are {', '.join(LAGRANGIAN_CADENCES)}."
+            )
+        if isinstance(warmup_frames, bool) or not isinstance(warmup_frames, int) or (
+            warmup_frames < 0
+        ):
+            raise ValueError(f"warmup_frames must be an integer >= 0, got {warmup_frames!r}.")
+        self.controller = controller
+        self.cadence = cadence
+        self.warmup_frames = warmup_frames
+        self.window = EpisodeCostWindow(window, controller.num_costs) if cadence == "step" else None
+        self._loss = [loss]  # a list: not a submodule (the loss is checkpointed on its own)
+        self._frames = 0
 
     @property
     def lagrangian(self) -> Tensor:
-        return self.multiplier.detach().to(torch.float64).clone()
+        return self.controller.lagrangian
 
-    def _update(self, cost: Tensor) -> Tensor:
-        gap = (cost - self.cost_limit).to(self.multiplier.dtype)
-        self.optimizer.zero_grad(set_to_none=True)
-        with torch.enable_grad():
-            loss = -(self.multiplier * gap).sum()
-            loss.backward()
-        self.optimizer.step()
-        with torch.no_grad():
-            self.multiplier.clamp_(0.0, self.upper_bound)
-        return self.lagrangian
+    @property
+    def warming_up(self) -> bool:
+        return self._frames <= self.warmup_frames
 
-    def get_extra_state(self):
-        return {"optimizer": self.optimizer.state_dict()}
+    def _set(self, lagrangian: list[float]) -> None:
+        self._loss[0].set_lagrangian(lagrangian)
 
-    def set_extra_state(self, state) -> None:
-        # Adam's load_state_dict keeps the given tensors when dtype and device match: copy, so
-        # that loading from another live controller does not share its moments.
-        self.optimizer.load_state_dict(copy.deepcopy(state["optimizer"]))
+    def observe(self, episode_costs: Tensor, frames: int) -> list[float] | None:
+        """A collected batch: the costs of the episodes that ended in it (``[episodes, m]``,
+        possibly none) and the frames collected so far. Returns the ``J`` lambda follows now
+        (``collect``: the batch's mean, if it updated; ``step``: the window's mean)."""
+        self._frames = frames
+        if self.cadence == "step":
+            self.window.extend(episode_costs)
+            return self.window.mean()
+        if episode_costs.shape[0] == 0 or self.warming_up:
+            return None
+        mean_cost = episode_costs.double().mean(0).tolist()
+        self._set(self.controller.update_floats(mean_cost))
+        return mean_cost
+
+    def after_gradient_step(self) -> bool:
+        """``step`` cadence: one controller update from the window. True if lambda updated."""
+        if self.window is None or self.warming_up:
+            return False
+        mean_cost = self.window.mean()
+        if mean_cost is None:
+            return False
+        self._set(self.controller.update_floats(mean_cost))
+        return True
+
+    def get_extra_state(self) -> dict[str, Any]:
+        return {"frames": self._frames}
+
+    def set_extra_state(self, state: dict[str, Any]) -> None:
+        self._frames = int(state["frames"])
 
     def extra_repr(self) -> str:
-        lr = self.optimizer.param_groups[0]["lr"]
-        return f"{super().extra_repr()}, lr={lr}, upper_bound={self.upper_bound}"
+        return f"cadence={self.cadence}, warmup_frames={self.warmup_frames}"

@@ -46,6 +46,7 @@ RUN_SPECIFIC_KEYS = (
     "device",
     "save_interval",
     "eval.random_baseline",
+    "resumes",  # what each resume changed (trainer.loop.record_resume)
 )
 
 

@@ -35,6 +35,7 @@ from s3rl_torchrl.objectives import (
     DDPGLagOptimizers,
     ForeachSoftUpdate,
     LagrangianController,
+    LagrangianUpdater,
     LearnedLagrangian,
     PIDLagrangian,
     PPOLagLoss,
@@ -100,7 +101,8 @@ class Agent:
     ``policy`` collects (SAC, PPO: the stochastic actor; DDPG: the actor plus exploration
     noise), ``actor`` is evaluated deterministically, ``update(batch)`` takes one gradient step
     (critics, actor, temperature, targets) and returns the detached losses and diagnostics,
-    whose names are ``log_keys``. ``prepare(batch)``, on-policy only, computes what the
+    whose names are ``log_keys``. ``lagrangian`` (None when unconstrained) updates lambda at the
+    configured cadence and writes it into ``loss``. ``prepare(batch)``, on-policy only, computes what the
     gradient steps read from a whole collected batch (PPO: the advantages); ``target_updater``
     is None without target networks (PPO).
     """
@@ -110,7 +112,7 @@ class Agent:
     loss: LossModule
     target_updater: SoftUpdate | None
     optimizers: SACLagOptimizers | DDPGLagOptimizers | PPOLagOptimizers
-    lagrangian: LagrangianController | None
+    lagrangian: LagrangianUpdater | None
     contrastive: ContrastivePhase | None
     update: Update
     log_keys: tuple[str, ...]
@@ -129,6 +131,7 @@ def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianControlle
             cost_ema=pid.ema_alpha,
             derivative_delay=pid.derivative_delay,
             ki_inside_integral=pid.ki_inside_integral,
+            derivative_history_init=pid.derivative_history_init,
             penalty_max=pid.penalty_max,
             lagrangian_init=algo.lagrangian_init,
         )
@@ -284,7 +287,15 @@ def build_agent(
             loss, optimizers, target_updater, algo.update_order, compile_fn or (lambda fn: fn)
         )
         log_keys = tuple(k for k in loss.out_keys if k != "lagrangian")
-    lagrangian = build_lagrangian(algo, cfg.task.cost_limit) if constrained else None
+    lagrangian = None
+    if constrained:
+        lagrangian = LagrangianUpdater(
+            build_lagrangian(algo, cfg.task.cost_limit),
+            loss,
+            cadence=algo.lagrangian_cadence,
+            window=algo.lagrangian_window,
+            warmup_frames=algo.lagrangian_warmup_frames,
+        )
 
     contrastive = None
     if algo.contrastive:

@@ -17,6 +17,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
+from s3rl_torchrl.objectives.lagrangian import LAGRANGIAN_CADENCES
 from s3rl_torchrl.trainer.schedule import (
     OffPolicySchedule,
     OnPolicySchedule,
@@ -140,8 +141,13 @@ class PIDConfig:
     derivative_delay: int = 1
     ki_inside_integral: bool = False
     penalty_max: float | None = None
+    # The derivative's cost history starts at the limit (FSRL: e_prev = 0) or at 0 (OmniSafe).
+    derivative_history_init: str = "limit"
 
     def check(self, path: str) -> None:
+        _check_choice(
+            f"{path}.derivative_history_init", self.derivative_history_init, ("limit", "zero")
+        )
         for name in ("kp", "ki", "kd"):
             _check_range(f"{path}.{name}", getattr(self, name), 0.0)
         _check_range(f"{path}.ema_alpha", self.ema_alpha, 0.0, 1.0)
@@ -183,8 +189,15 @@ class AlgoConfig:
     lagrangian: str = "pid"
     contrastive: bool = True
     pid: PIDConfig = field(default_factory=PIDConfig)
-    lagrangian_lr: float = 5e-3  # learned Lagrangian only
+    lagrangian_lr: float = 5e-3  # learned Lagrangian only: Adam's rate per update
     lagrangian_init: float = 0.0
+    # When lambda updates (objectives.LagrangianUpdater, docs/objectives.md): "collect" (FSRL,
+    # the paper: once per collect, from its finished episodes) or "step" (OmniSafe: after every
+    # gradient step, from the last lagrangian_window finished episodes). Gains and rates are
+    # per update, so each cadence needs its own (configs/pid/, configs/experiment/).
+    lagrangian_cadence: str = "collect"
+    lagrangian_window: int = 10  # episodes (cadence=step; OmniSafe's window_lens)
+    lagrangian_warmup_frames: int = 0  # lambda stays at lagrangian_init until past these frames
     rescaling: bool = True
     cost_entropy: bool = True  # subtract alpha*log_pi in the cost targets (FSRL, paper)
     gamma: float = 0.99
@@ -235,6 +248,9 @@ class AlgoConfig:
         self.contrastive_cfg.check(f"{path}.contrastive_cfg")
         _check_range(f"{path}.lagrangian_lr", self.lagrangian_lr, 0.0, low_inclusive=False)
         _check_range(f"{path}.lagrangian_init", self.lagrangian_init, 0.0)
+        _check_choice(f"{path}.lagrangian_cadence", self.lagrangian_cadence, LAGRANGIAN_CADENCES)
+        _check_range(f"{path}.lagrangian_window", self.lagrangian_window, 1)
+        _check_range(f"{path}.lagrangian_warmup_frames", self.lagrangian_warmup_frames, 0)
         _check_range(f"{path}.gamma", self.gamma, 0.0, 1.0)
         _check_range(f"{path}.tau", self.tau, 0.0, 1.0, low_inclusive=False)
         _check_range(f"{path}.n_step", self.n_step, 1)

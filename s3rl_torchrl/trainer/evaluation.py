@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -108,6 +109,47 @@ def evaluate(
         episode_lengths=lengths,
         episode_safe_steps=[int(n) for n in safe],
     )
+
+
+@dataclass
+class BestFeasible:
+    """FSRL's choice of the checkpoint to keep (``fsrl/trainer/base_trainer.py``,
+    ``perf_is_better``), applied to each epoch's deterministic evaluation: until an epoch is
+    within the cost limit, an epoch that is within it or has a higher reward replaces the best;
+    after that, only an epoch within the limit with a higher reward does. Its ``model_best.pt``
+    read in a 10-episode evaluation may be how the paper's Table 1 was made."""
+
+    reward: float = -math.inf
+    cost: float = math.inf
+    epoch: int = 0  # 0: no epoch evaluated yet
+    frames: int = 0
+
+    def update(self, reward: float, cost: float, limit: float, epoch: int, frames: int) -> bool:
+        """True if this epoch's evaluation (``reward``, ``cost``) becomes the best."""
+        if self.cost > limit:
+            better = cost <= limit or reward > self.reward
+        else:
+            better = cost <= limit and reward > self.reward
+        if better:
+            self.reward, self.cost, self.epoch, self.frames = reward, cost, epoch, frames
+        return better
+
+
+# The paper's training budget ("1M steps", experiment=paper): shorter runs are not converged.
+PAPER_FRAMES = 1_000_000
+
+
+def constraint_verdict(cost: float, limit: float, frames: int) -> str:
+    """One sentence under the result table: does the final evaluation keep the cost limit?"""
+    if cost <= limit:
+        return f"Within the cost limit: mean cost {cost:.2f} <= d = {limit:g}."
+    verdict = f"Over the cost limit: mean cost {cost:.2f} > d = {limit:g} after {frames} frames"
+    if frames < PAPER_FRAMES:
+        return (
+            f"{verdict}. A run this short has not converged: the paper trains "
+            f"{PAPER_FRAMES // 1000}k frames (docs/results.md, \"Holding the limit\")."
+        )
+    return f"{verdict}: this policy does not keep the constraint."
 
 
 class RandomPolicy:

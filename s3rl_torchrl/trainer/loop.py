@@ -8,12 +8,15 @@ iteration per collected batch:
    n-step transitions into the replay buffer; on-policy: the advantages (GAE) of the batch,
    which replaces the previous one, and its labelled states into a FIFO for the contrastive
    phase);
-2. update lambda once from the mean cost of the training episodes that ended in the batch
-   (none ended: no update), as FSRL does before that collect's gradient steps;
+2. hand the costs of the training episodes that ended in the batch to the Lagrangian: with
+   ``algo.lagrangian_cadence=collect`` (FSRL, the paper) lambda updates once now, from their
+   mean, before this collect's gradient steps (none ended: no update); with ``step``
+   (OmniSafe) they join the window of the last ``algo.lagrangian_window`` episodes;
 3. run the gradient steps the schedule owes for the batch (off-policy: ``update_per_step`` per
    collected frame after the warm-up; on-policy: ``ppo_epochs`` passes of minibatches), each
-   the algorithm's ``update`` (critics, actor, alpha for SAC, then the targets), and every
-   ``T`` gradient steps the contrastive phase on the policy encoder;
+   the algorithm's ``update`` (critics, actor, alpha for SAC, then the targets), followed under
+   cadence ``step`` by one lambda update from the window, and every ``T`` gradient steps the
+   contrastive phase on the policy encoder;
 4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
 
 Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
@@ -29,7 +32,7 @@ import random
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +54,7 @@ from s3rl_torchrl.trainer.builders import (
 )
 from s3rl_torchrl.trainer.checkpoint import (
     REPLAY_DIR,
+    CheckpointError,
     capture_rng_state,
     check_compatible,
     load_checkpoint,
@@ -58,7 +62,15 @@ from s3rl_torchrl.trainer.checkpoint import (
     save_checkpoint,
 )
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
-from s3rl_torchrl.trainer.evaluation import EvalResult, RandomPolicy, evaluate, format_table
+from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
+from s3rl_torchrl.trainer.evaluation import (
+    BestFeasible,
+    EvalResult,
+    RandomPolicy,
+    constraint_verdict,
+    evaluate,
+    format_table,
+)
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
 
 FINAL_EVAL_FILE = "final_eval.json"
@@ -75,6 +87,7 @@ RESUME_LOCKED = [
     "task.name",
     "algo.name",
     "algo.lagrangian",
+    "algo.lagrangian_cadence",
     "algo.contrastive",
     "algo.buffer_size",
     "algo.n_step",
@@ -84,8 +97,8 @@ RESUME_LOCKED = [
     "collector.num_envs",
     "collector.frames_per_batch",
     "collector.frames_per_epoch",
-    "collector.total_frames",
 ]
+BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
 
 
 @dataclass
@@ -166,6 +179,7 @@ class Trainer:
         if cfg.resume:
             checkpoint, checkpoint_dir = load_checkpoint(cfg.resume)
             check_compatible(checkpoint["config"], to_container(cfg), RESUME_LOCKED)
+            check_total_frames(cfg, checkpoint["counters"]["frames"])
             run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
         self.run_dir = Path(run_dir)
         if checkpoint is None:
@@ -189,8 +203,10 @@ class Trainer:
         self.updates = build_updates(cfg, self.agent, self.replay_buffer)
         self.schedule = self.updates.schedule
         self.counters = Counters()
+        self.best = BestFeasible()
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
+            record_resume(self.run_dir, checkpoint["config"], to_container(cfg), self.counters)
         else:
             (self.run_dir / CONFIG_FILE).write_text(json.dumps(to_container(cfg), indent=2))
         logger = make_torchrl_logger(
@@ -280,22 +296,26 @@ class Trainer:
         self.updates.store(batch)
 
     def _update_lagrangian(self, batch: TensorDictBase) -> None:
+        """Record the batch's finished episodes and hand their costs to the Lagrangian, which
+        updates lambda now (cadence collect) or after each gradient step (cadence step)."""
         done = batch["next", "done"].squeeze(-1)
-        if not done.any():
-            return
         episode_costs = batch["next", "episode_cost"][done]  # [episodes, m]
-        rewards = batch["next", "episode_reward"][done].sum(-1)
-        self._train_episodes.extend(zip(rewards.tolist(), episode_costs.sum(-1).tolist()))
-        self.counters.episodes += int(done.sum())
-        if self.agent.lagrangian is not None:
-            mean_cost = episode_costs.mean(0)  # J per cost
-            lagrangian = self.agent.lagrangian.update(mean_cost)
-            self.agent.loss.lagrangian = lagrangian
-            self.counters.lagrangian_updates += 1
+        if done.any():
+            rewards = batch["next", "episode_reward"][done].sum(-1)
+            self._train_episodes.extend(zip(rewards.tolist(), episode_costs.sum(-1).tolist()))
+            self.counters.episodes += int(done.sum())
+        updater = self.agent.lagrangian
+        if updater is None:
+            return
+        mean_cost = updater.observe(episode_costs, self.counters.frames)
+        self.counters.lagrangian_updates = updater.controller.num_updates
+        if mean_cost is not None:
+            # One row per batch, also under cadence step: J as the controller sees it now and
+            # lambda before this batch's gradient steps.
             self.metrics.log_scalars(
                 {
-                    "lagrangian/episode_cost": float(mean_cost.sum()),
-                    "lagrangian/value": float(lagrangian.sum()),
+                    "lagrangian/episode_cost": float(sum(mean_cost)),
+                    "lagrangian/value": self._lagrangian_value(),
                 },
                 step=self.counters.frames,
             )
@@ -320,6 +340,8 @@ class Trainer:
         self.counters.grad_steps += 1
         self.counters.pending_updates -= 1.0
         self._last_losses = dict(losses.items())
+        if agent.lagrangian is not None and agent.lagrangian.after_gradient_step():
+            self.counters.lagrangian_updates = agent.lagrangian.controller.num_updates
 
         phase = agent.contrastive
         interval = self.cfg.algo.contrastive_cfg.update_interval
@@ -336,6 +358,10 @@ class Trainer:
         c.epochs += 1
         start = time.perf_counter()
         result = evaluate(self.test_env, self.agent.actor, cfg.eval.episodes, cfg.eval.max_steps)
+        if self.best.update(
+            result.reward_mean, result.cost_mean, cfg.task.cost_limit, c.epochs, c.frames
+        ):
+            self._save_best()
         row = self._epoch_row(result, time.perf_counter() - start)
         self.metrics.log_epoch(row)
         self.history.append(row)
@@ -396,19 +422,35 @@ class Trainer:
         return float(lagrangian.sum()) if lagrangian is not None and lagrangian.numel() else 0.0
 
     def _final_evaluation(self) -> EvalResult:
-        cfg = self.cfg
+        """The last policy's evaluation and, beside it, the best-feasible checkpoint's
+        (``final_eval.json``: the last policy's at the top level, the other under
+        ``best_feasible``), then the result table."""
+        cfg, c = self.cfg, self.counters
         episodes, max_steps = cfg.eval.final_episodes, cfg.eval.max_steps
         result = evaluate(self.test_env, self.agent.actor, episodes, max_steps)
-        result.save(self.run_dir / FINAL_EVAL_FILE)
         label = f"{cfg.algo.name} {cfg.task.name} seed {cfg.seed}"
         rows = {label: result}
+        steps = {label: c.grad_steps}
+        saved = result.to_dict()
+        best_dir = self.run_dir / "checkpoints" / BEST_CHECKPOINT
+        if self.best.epoch and best_dir.is_dir():
+            best_actor, _ = load_policy(best_dir)
+            best = evaluate(self.test_env, best_actor, episodes, max_steps)
+            feasible = self.best.cost <= cfg.task.cost_limit
+            rows[
+                f"best-{'feasible' if feasible else 'infeasible'} checkpoint (epoch "
+                f"{self.best.epoch}, {self.best.frames} frames; FSRL's rule)"
+            ] = best
+            saved["best_feasible"] = {**best.to_dict(), **asdict(self.best), "feasible": feasible}
+        Path(self.run_dir / FINAL_EVAL_FILE).write_text(json.dumps(saved, indent=2) + "\n")
         if cfg.eval.random_baseline:
             rows["random policy (reference)"] = evaluate(
                 self.test_env, RandomPolicy(self.test_env), episodes, max_steps
             )
         title = f"Final evaluation: {episodes} deterministic episodes"
-        table = format_table(rows, title, grad_steps={label: self.counters.grad_steps})
-        print("\n" + table + f"\n\nRun directory: {self.run_dir}\n")
+        table = format_table(rows, title, grad_steps=steps)
+        verdict = constraint_verdict(result.cost_mean, cfg.task.cost_limit, c.frames)
+        print(f"\n{table}\n\n{verdict}\n\nRun directory: {self.run_dir}\n")
         return result
 
     def _interrupted(self, progress) -> TrainResult:
@@ -436,7 +478,17 @@ class Trainer:
             if agent.contrastive is not None
             else None,
             "rng": capture_rng_state(),
+            "best_feasible": asdict(self.best),
         }
+
+    def _save_best(self) -> Path:
+        """The policy FSRL would keep (``checkpoints/best``: weights and config, no buffer):
+        what ``s3rl-eval checkpoint=<run>/checkpoints/best`` and the final table evaluate."""
+        state = self.state_dict()
+        return save_checkpoint(
+            self.run_dir / "checkpoints" / BEST_CHECKPOINT,
+            {key: state[key] for key in ("config", "counters", "loss", "best_feasible")},
+        )
 
     def save(self) -> Path:
         return save_checkpoint(
@@ -459,7 +511,49 @@ class Trainer:
         self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
         self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
+        self.best = BestFeasible(**state.get("best_feasible", {}))
         restore_rng_state(state["rng"])
+
+
+def check_total_frames(cfg: TrainConfig, frames: int) -> None:
+    """A resumed run may get a larger ``collector.total_frames`` (extending a finished run),
+    never one below the frames it already collected."""
+    if cfg.collector.total_frames < frames:
+        raise CheckpointError(
+            f"Invalid value {cfg.collector.total_frames!r} for 'collector.total_frames': the "
+            f"checkpoint has already collected {frames} frames; resume with "
+            f"collector.total_frames >= {frames} (larger extends the run)."
+        )
+
+
+def record_resume(run_dir: Path, saved: dict, current: dict, counters: Counters) -> None:
+    """What a resume changed, kept in the run's ``config.json``: it then holds the config the
+    run continues with, and under ``resumes`` every resume's frame count and the values it
+    changed (``[before, after]``), e.g. ``compile`` or an extended ``collector.total_frames``.
+    An extended run's earlier ``final_eval.json`` is kept as ``final_eval_<frames>.json``."""
+    path = run_dir / CONFIG_FILE
+    history = json.loads(path.read_text()).get("resumes", []) if path.is_file() else []
+    changed = {
+        key: [before, after]
+        for key, (before, after) in _flat_differences(saved, current).items()
+        if key != "resume"
+    }
+    history.append({"frames": counters.frames, "changed": changed})
+    path.write_text(json.dumps({**current, "resumes": history}, indent=2))
+    final = run_dir / FINAL_EVAL_FILE
+    if final.is_file() and current["collector"]["total_frames"] > counters.frames:
+        final.rename(run_dir / f"final_eval_{counters.frames}.json")
+
+
+def _flat_differences(before: dict, after: dict, prefix: str = "") -> dict[str, tuple]:
+    out = {}
+    for key in sorted(set(before) | set(after)):
+        a, b = before.get(key), after.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out.update(_flat_differences(a, b, f"{prefix}{key}."))
+        elif a != b:
+            out[f"{prefix}{key}"] = (a, b)
+    return out
 
 
 def train(

@@ -271,3 +271,98 @@ def test_learned_lagrangian_on_the_plant_climbs_by_lr_and_settles():
     lam_star = (PLANT["J0"] - LIMIT) / PLANT["k"]
     assert np.abs(steps).max() <= lr * 1.001
     assert lams[-50:].mean() == pytest.approx(lam_star, rel=0.05)
+
+
+# ------------------------------------------------------------------ cadence: window and updater
+def test_learned_lagrangian_matches_torch_adam():
+    # The hand-written Adam against torch.optim.Adam on the same loss -lambda (J - d), clamped
+    # at 0 after each step, as OmniSafe's Lagrange does (float32 parameter there).
+    from s3rl_torchrl.objectives import LearnedLagrangian
+
+    costs = [40.0, 40.0, 3.0, 25.0, 0.0, 0.0, 0.0, 12.0, 9.0, 60.0] * 3
+    lag = LearnedLagrangian(cost_limit=10.0, lr=0.05, lagrangian_init=0.01)
+    multiplier = torch.nn.Parameter(torch.tensor(0.01, dtype=torch.float64))
+    adam = torch.optim.Adam([multiplier], lr=0.05)
+    for cost in costs:
+        adam.zero_grad()
+        (-multiplier * (cost - 10.0)).backward()
+        adam.step()
+        with torch.no_grad():
+            multiplier.clamp_(min=0.0)
+        assert lag.update(cost).item() == pytest.approx(multiplier.item(), abs=1e-12)
+
+
+def test_episode_cost_window_mean_by_hand():
+    from s3rl_torchrl.objectives import EpisodeCostWindow
+
+    window = EpisodeCostWindow(3)
+    assert window.mean() is None and len(window) == 0
+    window.extend(torch.zeros(0, 1))  # a batch in which no episode ended
+    assert window.mean() is None
+    window.extend(torch.tensor([[4.0], [8.0]]))
+    assert window.mean() == [6.0]
+    window.extend([[30.0], [1.0]])  # 4 drops out: (8 + 30 + 1) / 3
+    assert window.mean() == pytest.approx([13.0]) and len(window) == 3
+    copy = EpisodeCostWindow(3)
+    copy.load_state_dict(window.state_dict())
+    copy.extend([[2.0]])
+    window.extend([[2.0]])
+    assert copy.mean() == window.mean() == pytest.approx([11.0])
+    with pytest.raises(ValueError, match="window size"):
+        EpisodeCostWindow(0)
+
+
+class _Loss(torch.nn.Module):
+    """A loss with a lagrangian buffer (the mixin SACLagLoss uses)."""
+
+    def __new__(cls):
+        from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
+
+        kind = type("LagLoss", (LagrangianBufferMixin, torch.nn.Module), {})
+        loss = kind()
+        loss.num_costs = 1
+        loss._init_lagrangian(0.0)
+        return loss
+
+
+def test_updater_collect_cadence_warmup_and_batches_without_episodes():
+    from s3rl_torchrl.objectives import LagrangianUpdater
+
+    loss = _Loss()
+    updater = LagrangianUpdater(PIDLagrangian(cost_limit=10.0), loss, warmup_frames=1000)
+    assert updater.observe(torch.tensor([[12.0]]), 1000) is None  # warm-up: not past 1000
+    assert float(loss.lagrangian) == 0.0
+    assert updater.observe(torch.zeros(0, 1), 2000) is None  # no episode ended
+    assert updater.observe(torch.tensor([[12.0], [16.0]]), 3000) == [14.0]
+    # FSRL's first update from J = 14: 0.05 * 4 + 0.0005 * 4 + 0.1 * 4
+    assert float(loss.lagrangian) == pytest.approx(0.602, abs=1e-6)
+    assert not updater.after_gradient_step()  # collect cadence: nothing per step
+    assert updater.controller.num_updates == 1
+
+
+def test_updater_step_cadence_by_hand():
+    from s3rl_torchrl.objectives import LagrangianUpdater
+
+    loss = _Loss()
+    pid = PIDLagrangian(kp=0.0, ki=0.01, kd=0.0, cost_limit=10.0)
+    updater = LagrangianUpdater(pid, loss, cadence="step", window=2, warmup_frames=100)
+    assert updater.observe(torch.tensor([[30.0]]), 100) == [30.0]  # the window, not an update
+    assert not updater.after_gradient_step()  # warm-up: frames not past 100
+    updater.observe(torch.zeros(0, 1), 200)
+    assert updater.after_gradient_step() and updater.after_gradient_step()
+    # Two steps from J = 30: integral 20, 40 -> lambda 0.4
+    assert float(loss.lagrangian) == pytest.approx(0.4)
+    updater.observe(torch.tensor([[0.0], [2.0]]), 300)  # window (0 + 2) / 2 = 1: e = -9
+    updater.after_gradient_step()
+    assert float(loss.lagrangian) == pytest.approx(0.31)
+    # state_dict: the controller, the window and the frame count (the warm-up's clock).
+    other = LagrangianUpdater(
+        PIDLagrangian(kp=0.0, ki=0.01, kd=0.0, cost_limit=10.0), _Loss(),
+        cadence="step", window=2, warmup_frames=100,
+    )
+    other.load_state_dict(updater.state_dict())
+    assert other.window.mean() == [1.0] and not other.warming_up
+    assert other.after_gradient_step() and updater.after_gradient_step()
+    assert other.lagrangian.tolist() == updater.lagrangian.tolist() == pytest.approx([0.22])
+    with pytest.raises(ValueError, match="collect, step"):
+        LagrangianUpdater(pid, loss, cadence="epoch")

@@ -608,3 +608,25 @@ def test_checkpointing_a_compiled_loss_does_not_recompile_it():
     loss.state_dict()
     with torch._dynamo.config.patch(error_on_recompile=True):
         compiled(batch.copy())
+
+
+@pytest.mark.slow  # torch.compile of the loss
+def test_lambda_reaches_a_compiled_loss_without_recompiling():
+    # A per-step controller writes lambda after every gradient step: the compiled loss must
+    # read the new value (the buffer, set in place) and not recompile for it.
+    loss, *_ = make_loss()
+    compiled = torch.compile(loss)
+    batch = make_batch()
+    torch.manual_seed(0)
+    compiled(batch.copy())
+    outputs = []
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        for value in (0.5, 3.0, [7.25]):
+            loss.set_lagrangian(value)
+            torch.manual_seed(0)
+            outputs.append(compiled(batch.copy()))
+    for value, out in zip((0.5, 3.0, 7.25), outputs):
+        assert out["lagrangian"].tolist() == [value]
+    torch.manual_seed(0)
+    eager = loss(batch.copy())  # lambda 7.25, eager: the same actor loss as compiled
+    torch.testing.assert_close(outputs[-1]["loss_actor"], eager["loss_actor"])

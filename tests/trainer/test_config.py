@@ -147,8 +147,26 @@ def test_pid_options_fsrl_by_default_and_the_damped_ema(compose):
     # The command line still wins over the option.
     assert validate(compose("pid=ema", "algo.pid.ema_alpha=0.8")).algo.pid.ema_alpha == 0.8
     with pytest.raises(ConfigCompositionException) as err:
-        compose("pid=omnisafe")
+        compose("pid=lqr")
     assert "ema" in str(err.value) and "fsrl" in str(err.value)
+
+
+def test_pid_omnisafe_is_sacpid_per_gradient_step(compose):
+    # OmniSafe's SACPID.yaml: pid_kp 1e-6, pid_ki 1e-7, pid_kd 1e-7, pid_d_delay 10, both EMAs
+    # 0.95; pid_lagrange.py: ki inside the integral, cost history from 0, sum_norm (no cap).
+    from s3rl_torchrl.trainer.builders import build_lagrangian
+
+    cfg = validate(compose("algo=sac_lag", "pid=omnisafe", "algo.lagrangian_cadence=step"))
+    pid = cfg.algo.pid
+    assert (pid.kp, pid.ki, pid.kd, pid.ema_alpha, pid.derivative_delay) == (
+        1e-6, 1e-7, 1e-7, 0.95, 10,
+    )
+    assert pid.ki_inside_integral and pid.penalty_max is None
+    controller = build_lagrangian(cfg.algo, 25.0)
+    # OmniSafe's pid_update from J = 125, d = 25, written out: delta 100; I = 1e-7 * 100;
+    # delta_p = 0.05 * 100; cost_d = 0.05 * 125; D = max(0, cost_d - 0) (history from 0).
+    expected = 1e-6 * 0.05 * 100 + 1e-7 * 100 + 1e-7 * 0.05 * 125
+    assert controller.update(125.0).item() == pytest.approx(expected, rel=1e-12)
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,7 @@ from s3rl_torchrl.trainer.metrics import read_metrics
 FINAL_EVAL_KEYS = {
     "reward_mean", "reward_std", "cost_mean", "cost_std", "length_mean", "safe_occupancy",
     "episodes", "episode_rewards", "episode_costs", "episode_lengths", "episode_safe_steps",
+    "best_feasible",  # the best-feasible checkpoint's evaluation (tests/trainer/test_best_feasible)
 }
 
 
@@ -360,3 +361,49 @@ def test_last_partial_epoch_is_logged_and_saved(tiny_config, tmp_path):
     again = train(cfg, tmp_path / "ignored")
     assert _counters(again) == _counters(first)
     assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "500"]
+
+
+def test_extending_a_finished_run_continues_it(tiny_config, tmp_path):
+    # A 400-frame run carried to 600 frames: the extended run continues from its checkpoint,
+    # and its earlier final evaluation is kept under another name; config.json records the
+    # resume (frames, and what changed) and holds the config the run continued with.
+    from s3rl_torchrl.trainer import CheckpointError
+
+    cfg = tiny_config("algo=sac_lag", "collector.total_frames=400")
+    first = train(cfg, tmp_path)
+    final_400 = (tmp_path / "final_eval.json").read_text()
+
+    shorter = tiny_config("algo=sac_lag", "collector.total_frames=300")
+    shorter.resume = str(tmp_path)
+    with pytest.raises(CheckpointError, match="collector.total_frames.*>= 400"):
+        train(shorter, tmp_path / "x")
+    assert (tmp_path / "final_eval.json").read_text() == final_400  # nothing lost
+
+    longer = tiny_config("algo=sac_lag", "collector.total_frames=600", "compile=false")
+    longer.resume = str(tmp_path)
+    extended = train(longer, tmp_path / "ignored")
+    assert extended.status == "finished" and extended.counters.frames == 600
+    assert extended.counters.grad_steps == first.counters.grad_steps + 0.25 * 200
+    assert [r["frames"] for r in read_metrics(tmp_path)] == ["200", "400", "600"]
+    assert (tmp_path / "final_eval_400.json").read_text() == final_400
+    assert json.loads((tmp_path / "final_eval.json").read_text())["episodes"] == 2
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["collector"]["total_frames"] == 600
+    assert config["resumes"] == [
+        {"frames": 400, "changed": {"collector.total_frames": [400, 600]}}
+    ]
+
+
+def test_a_resume_records_what_it_changed(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac", "collector.total_frames=400")
+
+    def stop_after_first_epoch(trainer: Trainer, row):
+        trainer.stop.requested = True
+
+    train(cfg, tmp_path, on_epoch_end=stop_after_first_epoch)
+    resumed = tiny_config("algo=sac", "collector.total_frames=400", "threads=2")
+    resumed.resume = str(tmp_path)
+    train(resumed, tmp_path / "ignored")
+    config = json.loads((tmp_path / "config.json").read_text())
+    assert config["threads"] == 2
+    assert config["resumes"] == [{"frames": 200, "changed": {"threads": [1, 2]}}]
