@@ -74,8 +74,9 @@ def as_list(value: Any, where: str, count: int, meaning: str) -> list[Any]:
     if not isinstance(value, Sequence) or isinstance(value, str):
         raise ValueError(f"Bad layout: {where} must be a list of {count} {meaning}, got {value!r}.")
     if len(value) != count:
+        entries = "entry" if count == 1 else "entries"
         raise ValueError(
-            f"Bad layout: {where} must have {count} entries ({meaning}), got {len(value)}."
+            f"Bad layout: {where} must have {count} {entries} ({meaning}), got {len(value)}."
         )
     return list(value)
 

@@ -363,7 +363,7 @@ BAD_LAYOUTS = [
     (_with(agent=[0.0, 0.0]), r"layout\['agent'\] must be \[x, y, yaw\]"),
     (_with(goal=[1.0, float("nan")]), r"layout\['goal'\] must be finite"),
     (_with(hazards=LAYOUT["hazards"][:7]), r"layout\['hazards'\] must have 8 entries"),
-    (_with(vases=[[0.9, -1.2], [0.0, 1.0]]), r"layout\['vases'\] must have 1 entries"),
+    (_with(vases=[[0.9, -1.2], [0.0, 1.0]]), r"layout\['vases'\] must have 1 entry \(\[x, y\] or \[x, y, yaw\]\), got 2"),
     (_with(vases=[[0.9, -1.2, 0.0, 1.0]]), r"layout\['vases'\]\[0\] must be \[x, y\] or \[x, y, yaw\]"),
     (_with(agent=[1.2, 0.0, 0.0]), r"agent at \(1.2, 0\) is outside its placement area: x and y "
                                    r"must lie in \[-1.1, 1.1\]"),
