@@ -108,18 +108,19 @@ LIDAR_OBJECTS = ("goal", "hazards", "vases")
 # physics steps is drawn as binomial(10, 1.0) = 10 from the layout generator every env step.
 FRAME_SKIP_P = 1.0
 
-# Colours and geom groups (assets/color.py, assets/group.py): rendering only.
+# Colours (assets/color.py): rendering only. Safety-Gymnasium's geom groups (assets/group.py,
+# for its ray-cast lidar) are left at 0, so that Gymnasium's renderer, which draws groups 0-2,
+# shows every object.
 _RGBA = {"goal": (0, 1, 0, 0.25), "hazard": (0, 0, 1, 0.25), "vase": (0, 1, 1, 1)}
-_GROUP = {"goal": 9, "hazard": 3, "vase": 4}
 
 
 def _yaw_quat(yaw: float) -> np.ndarray:
     """The unit quaternion of a rotation by ``yaw`` about z (utils/common_utils.py: rot2quat),
-    normalised as mujoco 2.3.3's compiler normalises the quaternions of Safety-Gymnasium's world
-    XML: always divided by its norm (``mju_normalize4`` leaves a norm within 1e-15 of 1 alone,
-    which differs in the last bit for some angles)."""
+    divided by its norm. That gives, bit for bit, the quaternions mujoco 2.3.3 compiled from
+    Safety-Gymnasium's world XML for the recorded layouts (tests/envs/test_goal.py);
+    ``mju_normalize4``, which leaves a norm within 1e-15 of 1 alone, was one bit off for one."""
     w, z = math.cos(yaw / 2), math.sin(yaw / 2)
-    norm = math.sqrt(w * w + 0.0 * 0.0 + 0.0 * 0.0 + z * z)
+    norm = math.sqrt(w * w + z * z)
     return np.array([w / norm, 0.0, 0.0, z / norm])
 
 
@@ -319,16 +320,16 @@ def build_goal_world(spec: mujoco.MjSpec) -> None:
         body = spec.worldbody.add_body(name=f"vase{i}", pos=[0.0, 0.0, VASE_Z])
         body.add_freejoint(name=f"vase{i}")
         body.add_geom(name=f"vase{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[VASE_SIZE] * 3,
-                      density=VASE_DENSITY, rgba=_RGBA["vase"], group=_GROUP["vase"])
+                      density=VASE_DENSITY, rgba=_RGBA["vase"])
     body = spec.worldbody.add_body(name="goal", pos=[0.0, 0.0, GOAL_Z])
     body.add_geom(name="goal", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                   size=[GOAL_SIZE, GOAL_SIZE / 2, 0.0], contype=0, conaffinity=0,
-                  rgba=_RGBA["goal"], group=_GROUP["goal"])
+                  rgba=_RGBA["goal"])
     for i in range(NUM_HAZARDS):
         body = spec.worldbody.add_body(name=f"hazard{i}", pos=[0.0, 0.0, HAZARD_Z])
         body.add_geom(name=f"hazard{i}", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                       size=[HAZARD_SIZE, 1e-2, 0.0], contype=0, conaffinity=0,
-                      rgba=_RGBA["hazard"], group=_GROUP["hazard"])
+                      rgba=_RGBA["hazard"])
 
 
 class PointGoalEnv(MujocoEnv, EzPickle):
