@@ -21,6 +21,13 @@ import numpy as np
 from gymnasium.envs.mujoco import MujocoEnv
 from gymnasium.utils import EzPickle
 
+from s3rl_torchrl.envs.layout import (
+    Placed,
+    as_vector,
+    check_in_area,
+    check_keys,
+    layout_from_options,
+)
 from s3rl_torchrl.envs.spec import TaskSpec
 
 # tasks/safe_navigation/circle/circle_level0.py: num_steps = 500 (also the registered
@@ -74,26 +81,45 @@ def boundary_cost(x: float) -> float:
     return float(abs(x) > WALL_X)
 
 
-def pseudo_lidar(ego_xy: np.ndarray, num_bins: int = LIDAR_NUM_BINS) -> np.ndarray:
-    """Safety-Gymnasium's aliased pseudo-lidar of one point given in the robot's frame.
+def pseudo_lidar(
+    ego_xy: np.ndarray, num_bins: int = LIDAR_NUM_BINS, max_dist: float = LIDAR_MAX_DIST
+) -> np.ndarray:
+    """Safety-Gymnasium's aliased pseudo-lidar of points given in the robot's frame.
 
-    The point's bearing ``angle in [0, 2*pi)`` falls in bin ``k = floor(angle / (2*pi/n))``,
-    which reads ``s = max(0, 6 - dist) / 6``; the two neighbours read ``alias * s`` (bin k+1)
-    and ``(1 - alias) * s`` (bin k-1), ``alias`` being the bearing's fraction across bin k
-    (``bases/base_task.py: _obs_lidar_pseudo``); all other bins read 0.
+    ``ego_xy``: one point ``(x, y)`` or an ``(n, 2)`` array of points. Each point's bearing
+    ``angle in [0, 2*pi)`` falls in bin ``k = floor(angle / (2*pi/n))``, which reads
+    ``s = max(0, max_dist - dist) / max_dist``; the two neighbours read ``alias * s`` (bin k+1)
+    and ``(1 - alias) * s`` (bin k-1), ``alias`` being the bearing's fraction across bin k; with
+    several points every bin keeps the largest reading (``bases/base_task.py:
+    _obs_lidar_pseudo``); all other bins read 0. ``max_dist`` is 6 for the Circle tasks
+    (``circle_level0.py``) and 3 for the Goal task (``LidarConf`` default).
     """
-    obs = np.zeros(num_bins)
-    z = complex(float(ego_xy[0]), float(ego_xy[1]))
-    dist = abs(z)
+    points = np.asarray(ego_xy, dtype=np.float64).reshape(-1, 2)
+    return pseudo_lidars(points, np.zeros(len(points), dtype=np.int64), 1, num_bins, max_dist)
+
+
+def pseudo_lidars(
+    ego_xy: np.ndarray, groups: np.ndarray, num_groups: int, num_bins: int, max_dist: float
+) -> np.ndarray:
+    """One :func:`pseudo_lidar` per group of points, concatenated (``num_groups * num_bins``):
+    point ``i`` (row of ``ego_xy``, shape ``(n, 2)``) is seen by lidar ``groups[i]``. One pass
+    for all of a task's lidars, with the same arithmetic as one call per lidar."""
+    obs = np.zeros(num_groups * num_bins)
+    # Distance and bearing of x + iy as Safety-Gymnasium takes them (np.abs and np.angle of a
+    # complex number; np.hypot rounds differently in the last bit).
+    z = np.empty(len(ego_xy), dtype=np.complex128)
+    z.real, z.imag = ego_xy[:, 0], ego_xy[:, 1]
+    dist = np.abs(z)
     angle = np.angle(z) % (2 * np.pi)
     bin_size = 2 * np.pi / num_bins
     # min(): an angle that rounds to exactly 2*pi must not index past the last bin.
-    k = min(int(angle / bin_size), num_bins - 1)
-    sensor = max(0.0, LIDAR_MAX_DIST - dist) / LIDAR_MAX_DIST
-    alias = (angle - k * bin_size) / bin_size
-    obs[k] = max(obs[k], sensor)
-    obs[(k + 1) % num_bins] = max(obs[(k + 1) % num_bins], alias * sensor)
-    obs[(k - 1) % num_bins] = max(obs[(k - 1) % num_bins], (1 - alias) * sensor)
+    k = np.minimum((angle / bin_size).astype(np.int64), num_bins - 1)
+    sensor = np.maximum(0.0, max_dist - dist) / max_dist
+    alias = (angle - bin_size * k) / bin_size
+    base = groups * num_bins
+    np.maximum.at(obs, base + k, sensor)
+    np.maximum.at(obs, base + (k + 1) % num_bins, alias * sensor)
+    np.maximum.at(obs, base + (k - 1) % num_bins, (1 - alias) * sensor)
     return obs
 
 
@@ -107,6 +133,11 @@ class CircleEnv(MujocoEnv, EzPickle):
     robot body's position and velocity. The episode never terminates; the registered time limit
     truncates it at 500 steps. Observation (float64): the site sensors, the ball joints' sensors
     (Car), then the 16-bin lidar of the circle's centre.
+
+    ``reset(options={"layout": {"agent": [x, y, yaw]}})`` starts the robot at rest at that pose
+    instead of a random one (:func:`parse_circle_layout` checks it first). The random pose is
+    drawn all the same, so the generator's stream, and so every later reset, does not depend on
+    whether a layout was given.
     """
 
     xml_file: ClassVar[str]
@@ -136,6 +167,7 @@ class CircleEnv(MujocoEnv, EzPickle):
             default_camera_config={"distance": 5.0, "elevation": -90.0, "lookat": [0, 0, 0]},
         )
         self._agent_id = self.model.body("agent").id
+        self._layout: tuple[float, float, float] | None = None  # a pending reset's layout
         self._jacp = np.zeros((3, self.model.nv))
         n_sensors = sum(int(self.model.sensor(s).dim[0]) for s in SITE_SENSORS)
         n_sensors += 12 * len(self.ball_joints)  # angular velocity (3) + rotation matrix (9)
@@ -187,10 +219,19 @@ class CircleEnv(MujocoEnv, EzPickle):
             self.render()
         return self._get_obs(), reward, False, False, info
 
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        layout = layout_from_options(options)
+        # Checked before the physics (or the generator) is touched.
+        self._layout = None if layout is None else parse_circle_layout(layout)
+        return super().reset(seed=seed)
+
     def reset_model(self) -> np.ndarray:
         half = PLACEMENT_HALF_WIDTH
         x, y = self.np_random.uniform(-half, half, size=2)
         yaw = self.np_random.uniform(0.0, 2 * np.pi)
+        if self._layout is not None:
+            x, y, yaw = self._layout
+            self._layout = None
         qpos = self.init_qpos.copy()
         self._place(qpos, x, y, yaw)
         self.set_state(qpos, np.zeros(self.model.nv))
@@ -198,6 +239,20 @@ class CircleEnv(MujocoEnv, EzPickle):
 
     def _place(self, qpos: np.ndarray, x: float, y: float, yaw: float) -> None:
         raise NotImplementedError
+
+
+def parse_circle_layout(layout: dict[str, Any]) -> tuple[float, float, float]:
+    """Check a Circle layout, ``{"agent": [x, y, yaw]}``, and return ``(x, y, yaw)``.
+
+    The position must lie in Safety-Gymnasium's placement area, ``|x|, |y| <= 0.8``
+    (``circle_level0.py: agent.placements``); the yaw is any finite angle in radians.
+    """
+    check_keys(layout, ("agent",))
+    x, y, yaw = as_vector(layout["agent"], "layout['agent']", (3,), "[x, y, yaw]")
+    where = "Safety-Gymnasium's agent placements (-0.8, -0.8, 0.8, 0.8), circle_level0.py"
+    check_in_area(Placed("agent", np.array([x, y]), 0.0), -PLACEMENT_HALF_WIDTH,
+                  PLACEMENT_HALF_WIDTH, where)
+    return float(x), float(y), float(yaw)
 
 
 class PointCircleEnv(CircleEnv):

@@ -9,7 +9,8 @@ Every public lookup (:func:`get_task`, :func:`task_names`, the trainer's ``task=
   https://safety-gymnasium.readthedocs.io/en/latest/environments/safe_velocity.html);
 - bullet: the Run and Circle tasks of the upstream ``bullet-safety-gym`` package
   (:data:`~s3rl_torchrl.envs.bullet.BULLET_TASKS`);
-- circle: Safety-Gymnasium's Circle tasks rebuilt natively (``s3rl_torchrl.envs.circle``).
+- circle: Safety-Gymnasium's Circle tasks rebuilt natively (``s3rl_torchrl.envs.circle``);
+- goal: Safety-Gymnasium's SafetyPointGoal1 rebuilt natively (``s3rl_torchrl.envs.goal``).
 
 Adding a task is one entry in its family's tuple.
 """
@@ -22,6 +23,7 @@ from typing import Literal
 
 from s3rl_torchrl.envs.bullet import BULLET_TASKS
 from s3rl_torchrl.envs.circle import CIRCLE_TASKS
+from s3rl_torchrl.envs.goal import GOAL_TASKS
 from s3rl_torchrl.envs.spec import TaskSpec
 
 # Each family's module defines its TaskSpec tuple (and registers its ids with Gymnasium in
@@ -151,7 +153,7 @@ def _collect(*families: Iterable[TaskSpec]) -> dict[str, TaskSpec]:
 
 
 #: Every task id this package knows, mapped to its spec.
-TASKS: dict[str, TaskSpec] = _collect(VELOCITY_SPECS, BULLET_TASKS, CIRCLE_TASKS)
+TASKS: dict[str, TaskSpec] = _collect(VELOCITY_SPECS, BULLET_TASKS, CIRCLE_TASKS, GOAL_TASKS)
 
 
 def task_names(
@@ -162,7 +164,7 @@ def task_names(
     Args:
         include_variants: keep opt-in variants that are different tasks (the v5-robot ids).
         include_aliases: keep second ids of the same task (e.g. ``...VelocityGymnasium-v1``).
-        family: only this family (``"velocity"``, ``"bullet"``, ``"circle"``).
+        family: only this family (``"velocity"``, ``"bullet"``, ``"circle"``, ``"goal"``).
     """
     return sorted(
         name
@@ -184,7 +186,7 @@ def get_task(name: str) -> TaskSpec:
 
 
 #: The task ids the S3RL paper evaluates (Table 1; ``SafetyDroneCircle-v0`` is in §4's text and
-#: Figure 2). Table 1's ``SafetyPointGoal1Gymnasium-v0`` (a Goal task) is not built here.
+#: Figure 2).
 PAPER_TASK_IDS: tuple[str, ...] = (
     "SafetyHalfCheetahVelocityGymnasium-v1",
     "SafetyHopperVelocityGymnasium-v1",
@@ -202,10 +204,11 @@ PAPER_TASK_IDS: tuple[str, ...] = (
     "SafetyAntCircle-v0",
     "SafetyPointCircle1Gymnasium-v0",
     "SafetyCarCircle1Gymnasium-v0",
+    "SafetyPointGoal1Gymnasium-v0",
 )
 
 
-FAMILY_ORDER = {"velocity": 0, "bullet": 1, "circle": 2}
+FAMILY_ORDER = {"velocity": 0, "bullet": 1, "circle": 2, "goal": 3}
 
 
 def tasks_markdown_table() -> str:

@@ -1,7 +1,7 @@
 """What every task of the registry says about itself, whatever its family.
 
 This module imports nothing from the rest of :mod:`s3rl_torchrl.envs`, so every family's
-module (``velocity``, ``bullet``, ``circle``) can build its entries without import cycles.
+module (``velocity``, ``bullet``, ``circle``, ``goal``) can build its entries without import cycles.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: The task families; each has its own module and Gymnasium registration.
-FAMILIES: tuple[str, ...] = ("velocity", "bullet", "circle")
+FAMILIES: tuple[str, ...] = ("velocity", "bullet", "circle", "goal")
 
 #: How to install each optional extra a task may need (named in the missing-package error).
 EXTRA_INSTALL: dict[str, str] = {
@@ -26,7 +26,7 @@ class TaskSpec:
 
     Attributes:
         env_id: the Gymnasium id, e.g. ``"SafetyBallRun-v0"`` (also the ``task=`` value).
-        family: ``"velocity"``, ``"bullet"`` or ``"circle"``.
+        family: ``"velocity"``, ``"bullet"``, ``"circle"`` or ``"goal"``.
         source: where the task comes from, e.g. ``"bullet-safety-gym 1.4.0"``.
         max_episode_steps: the time limit (Gymnasium's ``TimeLimit``) of one episode.
         cost_limit: the default per-episode cost limit ``d`` (``task.cost_limit``).

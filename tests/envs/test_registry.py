@@ -15,8 +15,8 @@ from s3rl_torchrl.envs.registry import PAPER_TASK_IDS, tasks_markdown_table
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "tasks.md"
 
-# The S3RL paper's Table 1 (minus SafetyPointGoal1Gymnasium-v0, a Goal task not built here)
-# plus SafetyDroneCircle-v0 from §4's text and Figure 2, typed from the paper.
+# The S3RL paper's Table 1 plus SafetyDroneCircle-v0 from §4's text and Figure 2, typed from the
+# paper.
 PAPER = {
     "SafetyCarRun-v0", "SafetyBallRun-v0", "SafetyBallCircle-v0", "SafetyCarCircle-v0",
     "SafetyDroneRun-v0", "SafetyAntRun-v0", "SafetyAntCircle-v0", "SafetyDroneCircle-v0",
@@ -24,6 +24,7 @@ PAPER = {
     "SafetyHalfCheetahVelocityGymnasium-v1", "SafetyHopperVelocityGymnasium-v1",
     "SafetySwimmerVelocityGymnasium-v1", "SafetyWalker2dVelocityGymnasium-v1",
     "SafetyAntVelocityGymnasium-v1", "SafetyHumanoidVelocityGymnasium-v1",
+    "SafetyPointGoal1Gymnasium-v0",
 }
 
 
@@ -38,7 +39,7 @@ def test_every_paper_task_is_registered():
 
 def test_entries_are_consistent():
     families = {spec.family for spec in TASKS.values()}
-    assert families == {"velocity", "bullet", "circle"}
+    assert families == {"velocity", "bullet", "circle", "goal"}
     for name, spec in TASKS.items():
         assert isinstance(spec, TaskSpec) and spec.env_id == name
         assert spec.max_episode_steps > 0 and spec.obs_dim > 0 and spec.act_dim > 0
@@ -62,13 +63,15 @@ def test_task_names_filters():
     assert "SafetyHalfCheetahVelocityGymnasium-v1" not in main
     assert "SafetyHalfCheetahVelocityMujocoV5-v1" not in main
     assert set(task_names(family="bullet")) == {s.env_id for s in TASKS.values() if s.family == "bullet"}
-    assert set().union(*(task_names(family=f) for f in ("velocity", "bullet", "circle"))) == set(every)
+    families = ("velocity", "bullet", "circle", "goal")
+    assert set().union(*(task_names(family=f) for f in families)) == set(every)
 
 
 def test_unknown_task_lists_every_family():
     with pytest.raises(ValueError, match="Unknown task 'SafetyBallRun-v9'") as err:
         get_task("SafetyBallRun-v9")
-    for name in ("SafetyBallRun-v0", "SafetyPointCircle1-v0", "SafetyHopperVelocity-v1"):
+    for name in ("SafetyBallRun-v0", "SafetyPointCircle1-v0", "SafetyHopperVelocity-v1",
+                 "SafetyPointGoal1-v0"):
         assert name in str(err.value)
 
 

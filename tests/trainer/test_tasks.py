@@ -17,9 +17,13 @@ from s3rl_torchrl.trainer import ConfigError, train, validate
 from s3rl_torchrl.trainer.config import register_configs
 
 BIN = Path(sys.executable).parent
-# One Bullet task and every Circle task (their family's main ids; the paper's `...Gymnasium`
+# One Bullet task and every Circle and Goal task (their family's main ids; the paper's `...Gymnasium`
 # aliases build the same envs).
-E2E_TASKS = ["SafetyBallRun-v0", *task_names(False, False, family="circle")]
+E2E_TASKS = [
+    "SafetyBallRun-v0",
+    *task_names(False, False, family="circle"),
+    *task_names(False, False, family="goal"),
+]
 
 
 @pytest.mark.parametrize("task", task_names(include_aliases=False))
