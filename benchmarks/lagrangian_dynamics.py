@@ -92,6 +92,10 @@ SETTINGS: dict[str, list[str]] = {
     # OmniSafe's SACPID (configs/pid/omnisafe.yaml) with its integral gain per env step (1e-7)
     # scaled to the paper's 0.2 gradient steps per env step: the same lambda per frame.
     "step_pid_omnisafe": ["pid=omnisafe", "algo.pid.ki=5e-7", *STEP],
+    # The controllers alone, for --experiment safe (configs/experiment/safe.yaml: the step
+    # cadence above and 1000-frame collects); the second round of the selection.
+    "learned_lr3e-4": ["algo.lagrangian=learned", "algo.lagrangian_lr=0.0003"],
+    "pid_omnisafe": ["pid=omnisafe", "algo.pid.ki=5e-7"],
 }
 BASE_OVERRIDES = ["threads=1", "logger.progress_bar=false"]
 LAGRANGIAN_ALGOS = ("sac_lag", "s3rl")  # the off-policy SAC pair whose schedule this studies

@@ -23,8 +23,8 @@ from tensordict import TensorDict
 from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer
 
 from s3rl_torchrl.data import SafeUnsafeSampler
+from s3rl_torchrl.diagnostics.probe import replay_probe
 from s3rl_torchrl.modules import build_s3rl_actor, get_policy_encoder
-from s3rl_torchrl.report.probe import replay_probe
 
 OBS_DIM, ACTION_DIM = 17, 6
 

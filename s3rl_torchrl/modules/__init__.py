@@ -1,5 +1,6 @@
 """Network builders: the S3RL actor (policy encoder + Gaussian head), the deterministic DDPG
-actor (same encoder), the critics."""
+actor (same encoder), the critics, and ``BatchedMLP`` (many critics in one chain of batched
+matmuls). Nothing here imports from the layers above (objectives, trainer)."""
 
 from s3rl_torchrl.modules.activation import ReLU, relu  # noqa: F401
 from s3rl_torchrl.modules.actor import (  # noqa: F401
@@ -11,7 +12,7 @@ from s3rl_torchrl.modules.actor import (  # noqa: F401
     build_s3rl_actor,
     get_policy_encoder,
 )
-from s3rl_torchrl.modules.contrastive import ContrastivePhase  # noqa: F401
+from s3rl_torchrl.modules.batched_mlp import BatchedMLP  # noqa: F401
 from s3rl_torchrl.modules.critics import (  # noqa: F401
     build_cost_qvalue_network,
     build_qvalue_network,

@@ -27,10 +27,9 @@ import torch
 from tensordict import TensorDict, TensorDictBase, TensorDictParams
 from tensordict.nn import ProbabilisticTensorDictSequential, TensorDictModule, dispatch
 from tensordict.utils import NestedKey
-from torch import Tensor, nn
+from torch import Tensor
 from torchrl.data.tensor_specs import TensorSpec
 from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.modules import MLP, ValueOperator
 from torchrl.objectives.sac import SACLoss, compute_rsample_log_prob
 from torchrl.objectives.utils import (
     ValueEstimators,
@@ -39,30 +38,18 @@ from torchrl.objectives.utils import (
     distance_loss,
 )
 
-from s3rl_torchrl.modules.activation import ReLU, relu
+from s3rl_torchrl.modules.batched_mlp import BatchedMLP
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers", "sac_lag_update"]
 
 _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
 _CRITIC_EVAL_CHOICES = ("auto", "batched_mlp", "fused_vmap", "vmap")
-# Elementwise activations: applying them to [N, batch, features] equals applying them per net.
-_ELEMENTWISE = (
-    ReLU,
-    nn.ReLU,
-    nn.ReLU6,
-    nn.LeakyReLU,
-    nn.ELU,
-    nn.SELU,
-    nn.CELU,
-    nn.GELU,
-    nn.SiLU,
-    nn.Mish,
-    nn.Tanh,
-    nn.Sigmoid,
-    nn.Softplus,
-    nn.Identity,
-)
+def _detached(params: TensorDictBase) -> TensorDictBase:
+    """``params.detach()`` (SACLoss's) without locking the copy: ``detach()`` of locked
+    ``TensorDictParams`` locks its result, and tensordict warns about a ``lock_()`` inside a
+    compiled graph at every compile of the loss."""
+    return params.apply(Tensor.detach, filter_empty=True)
 
 
 def _next(key: NestedKey) -> tuple[str, ...]:
@@ -71,106 +58,6 @@ def _next(key: NestedKey) -> tuple[str, ...]:
 
 def _is_module_list(module) -> bool:
     return isinstance(module, (list, tuple))
-
-
-class _BatchedMLP:
-    """``N`` critics of one torchrl ``MLP`` architecture as a chain of batched matmuls.
-
-    Equivalent to vmapping the module over stacked parameters ``[N, ...]``, minus the
-    functional-call and vmap overhead that dominates at RL sizes (``docs/objectives.md``).
-    Built only for ``TensorDictModule(MLP)`` critics whose layers are ``nn.Linear`` and
-    elementwise activations; anything else (dropout, norms, custom modules) uses vmap.
-    """
-
-    def __init__(self, in_keys, layers):
-        self.in_keys = list(in_keys)
-        self.layers = layers  # ("linear", weight key, bias key) or ("act", module)
-
-    @classmethod
-    def from_module(cls, module, params: TensorDictBase) -> _BatchedMLP | None:
-        if type(module) not in (TensorDictModule, ValueOperator) or len(module.out_keys) != 1:
-            return None
-        mlp = module.module
-        if type(mlp) is not MLP or getattr(mlp, "_reshape_out", True):
-            return None
-        flat_keys = set(params.flatten_keys().keys())
-        layers, expected = [], set()
-        for name, layer in mlp.named_children():
-            if type(layer) is nn.Linear:
-                if layer.bias is None:
-                    return None
-                weight, bias = ("module", name, "weight"), ("module", name, "bias")
-                layers.append(("linear", weight, bias))
-                expected.update((".".join(weight), ".".join(bias)))
-            elif type(layer) in _ELEMENTWISE:
-                layers.append(("act", layer))
-            else:
-                return None
-        if flat_keys != expected or not layers or layers[-1][0] != "linear":
-            return None
-        last_bias = params.get(layers[-1][2])
-        if last_bias.shape[-1] != 1:
-            return None
-        return cls(module.in_keys, layers)
-
-    @staticmethod
-    def _leaf(parts: Sequence[TensorDictBase], key) -> Tensor:
-        # Concatenating leaf by leaf costs a few microseconds; a TensorDict-level cat of the
-        # reward and cost parameters costs ~0.1 ms per call, a few % of an eager step.
-        if len(parts) == 1:
-            return parts[0].get(key)
-        return torch.cat([part.get(key) for part in parts], 0)
-
-    def _rest(self, x: Tensor, parts: Sequence[TensorDictBase], batch_shape) -> Tensor:
-        """The layers after the first linear one: ``[N, M, H] -> [N, *batch]``."""
-        for layer in self.layers[1:]:
-            if layer[0] == "act":
-                # In place where autograd allows it (no op before ReLU saves its output): fewer
-                # [N, batch, width] temporaries, which measurably cost page faults on CPU.
-                # Compiled, `relu` keeps bool masks out of the graph (modules/activation.py).
-                x = relu(x, inplace=True) if type(layer[1]) in (nn.ReLU, ReLU) else layer[1](x)
-            else:
-                weight, bias = self._leaf(parts, layer[1]), self._leaf(parts, layer[2])
-                x = torch.baddbmm(bias.unsqueeze(-2), x, weight.transpose(-1, -2))
-        return x.squeeze(-1).reshape(x.shape[0], *batch_shape)
-
-    def __call__(self, td: TensorDictBase, parts: Sequence[TensorDictBase]) -> Tensor:
-        """Values ``[N, *batch]`` of the critics whose stacked parameters are ``parts``
-        (several parameter sets are concatenated along the critic dimension)."""
-        x = torch.cat([td.get(key) for key in self.in_keys], -1)
-        batch_shape = x.shape[:-1]
-        weight, bias = self._leaf(parts, self.layers[0][1]), self._leaf(parts, self.layers[0][2])
-        # The input is shared by all critics: broadcast [M, F] @ [N, F, H].
-        x = torch.matmul(x.reshape(-1, x.shape[-1]), weight.transpose(-1, -2))
-        return self._rest(x.add_(bias.unsqueeze(-2)), parts, batch_shape)
-
-    def first_layer_term(
-        self, td: TensorDictBase, parts: Sequence[TensorDictBase], keys, *, bias: bool
-    ) -> Tensor:
-        """``sum_k x_k W1[:, cols_k]^T`` (+ ``b1``) over the inputs ``keys``: ``[N, M, H]``.
-
-        The first layer of ``Q(concat(x_1, ..., x_K))`` is a sum of per-input terms; computing
-        them apart lets the actor loss (a) reuse the observation term of the critic loss and (b)
-        backpropagate into the action columns only instead of the whole input.
-        """
-        weight = self._leaf(parts, self.layers[0][1])
-        out, start = None, 0
-        for key in self.in_keys:
-            x = td.get(key)
-            width = x.shape[-1]
-            if key in keys:
-                cols = weight[..., start : start + width].transpose(-1, -2)
-                term = torch.matmul(x.reshape(-1, width), cols)
-                out = term if out is None else out + term
-            start += width
-        if bias:
-            b1 = self._leaf(parts, self.layers[0][2]).unsqueeze(-2)
-            out = b1 if out is None else out + b1
-        return out
-
-    def from_first_layer(self, h: Tensor, parts: Sequence[TensorDictBase], batch_shape) -> Tensor:
-        """Values ``[N, *batch]`` from the pre-activation of the first layer ``[N, M, H]``."""
-        return self._rest(h, parts, batch_shape)
 
 
 class SACLagLoss(LagrangianBufferMixin, SACLoss):
@@ -394,9 +281,9 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
 
     def _resolve_critic_eval(self, choice: str) -> str:
         same = self.num_costs == 0 or self._same_architecture()
-        batched = _BatchedMLP.from_module(self.qvalue_network, self.qvalue_network_params)
+        batched = BatchedMLP.from_module(self.qvalue_network, self.qvalue_network_params)
         if batched is not None and self.num_costs:
-            cost_batched = _BatchedMLP.from_module(
+            cost_batched = BatchedMLP.from_module(
                 self.cost_qvalue_network, self.cost_qvalue_network_params
             )
             if cost_batched is None or not same:
@@ -672,9 +559,14 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
 
     @property
     @_cache_values
+    def _cached_detached_qvalue_params(self):
+        return _detached(self.qvalue_network_params)
+
+    @property
+    @_cache_values
     def _cached_detached_cost_qvalue_params(self):
-        # Cached like SACLoss's reward counterpart: detach() shares storage, so it stays current.
-        return self.cost_qvalue_network_params.detach()
+        # Cached like the reward counterpart: detached tensors share storage, so it stays current.
+        return _detached(self.cost_qvalue_network_params)
 
     def actor_loss(self, tensordict: TensorDictBase) -> tuple[Tensor, dict[str, Tensor]]:
         """Lagrangian actor loss; metadata: ``log_prob`` (detached), ``reward_q``, ``cost_q``."""

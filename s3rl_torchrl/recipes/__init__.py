@@ -7,6 +7,8 @@ checkout (editable install) reads it in place. :func:`config_dir` finds whicheve
 
 from __future__ import annotations
 
+import sys
+import warnings
 from pathlib import Path
 
 CONFIG_NAMES = ("train.yaml", "evaluate.yaml")
@@ -24,3 +26,32 @@ def config_dir() -> Path:
         + " and ".join(str(c) for c in candidates)
         + ". Reinstall the package (pip install s3rl-torchrl, or pip install -e . in a checkout)."
     )
+
+
+# Warnings of third-party code that a user of the recipes cannot act on, each matched exactly
+# (never all warnings). Their causes are not ours: tensordict reads a torch._dynamo option that
+# torch deprecated; Gymnasium's half_cheetah.xml (HalfCheetah-v4, the velocity task's robot)
+# uses MuJoCo's deprecated settotalmass attribute.
+TENSORDICT_DYNAMO_OPTION = r"torch\._dynamo\.config\.inline_inbuilt_nn_modules is deprecated"
+MUJOCO_SETTOTALMASS = "compiler attribute 'settotalmass' is deprecated"
+
+
+def quiet_known_warnings() -> None:
+    """Silence exactly the third-party warnings above; every other warning is shown as before
+    (MuJoCo's on stderr, with its ``WARNING:`` prefix)."""
+    import mujoco
+
+    warnings.filterwarnings(
+        "ignore", message=TENSORDICT_DYNAMO_OPTION, category=FutureWarning, module="tensordict"
+    )
+    previous = mujoco.get_mju_user_warning()
+
+    def on_mujoco_warning(message: str) -> None:
+        if message.startswith(MUJOCO_SETTOTALMASS):
+            return
+        if previous is not None:
+            previous(message)
+        else:
+            print(f"WARNING: {message}", file=sys.stderr)
+
+    mujoco.set_mju_user_warning(on_mujoco_warning)

@@ -17,7 +17,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from s3rl_torchrl.recipes import config_dir
+from s3rl_torchrl.recipes import config_dir, quiet_known_warnings
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
@@ -49,6 +49,7 @@ def _main(cfg: DictConfig) -> float:
 
 
 def main() -> None:
+    quiet_known_warnings()
     _main()
 
 

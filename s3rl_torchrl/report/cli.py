@@ -54,7 +54,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                              "t-SNE time grows faster than linearly)")
     parser.add_argument("--export-runs", default=None, metavar="DEST",
                         help="copy config.json, metrics.csv and final_eval.json of every run "
-                             "to DEST (same layout; no checkpoints), store each group's Figure-4 "
+                             "to DEST (same layout; no checkpoints; copies of runs gone from "
+                             "RUNS are removed), store each group's Figure-4 "
                              "panel (t-SNE coordinates and probe, drawn from its checkpoint) "
                              "beside its copy, and exit: a small tree to keep in version "
                              "control, from which `s3rl-report DEST` rebuilds the report")
@@ -68,14 +69,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if args.export_runs is not None:
         try:
-            copied = export_runs(args.runs, args.export_runs)
+            export = export_runs(args.runs, args.export_runs)
             panels = [] if args.no_embeddings else export_embedding_panels(
                 args.runs, args.export_runs, args.embedding_episodes, args.tsne_states)
         except ReportError as err:
             print(f"s3rl-report: error: {err}", file=sys.stderr)
             return 2
-        print(f"Copied the results of {len(copied)} runs to {args.export_runs}"
-              + (f" and Figure 4's panels of {len(panels)} of them" if panels else ""))
+        print(f"Copied the results of {len(export.copied)} runs to {args.export_runs}"
+              + (f" and Figure 4's panels of {len(panels)} of them" if panels else "")
+              + (f"; removed {len(export.removed)} run copies no longer in {args.runs}: "
+                 + ", ".join(str(p) for p in export.removed) if export.removed else ""))
         return 0
     try:
         report = build_report(

@@ -19,9 +19,9 @@ import numpy as np
 import torch
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
+from s3rl_torchrl.diagnostics.probe import ProbeResult, linear_probe
 from s3rl_torchrl.envs import get_task, make_env
 from s3rl_torchrl.modules import get_policy_encoder
-from s3rl_torchrl.report.probe import ProbeResult, linear_probe
 from s3rl_torchrl.report.runs import FIGURE4_FILES
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 

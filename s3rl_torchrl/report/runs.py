@@ -8,6 +8,7 @@ every run enters the learning curves.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -18,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "Export",
     "ReportError",
     "Run",
     "RunGroup",
@@ -180,12 +182,19 @@ def find_runs(root: str | Path) -> list[Run]:
 EXPORTED_FILES = (CONFIG_FILE, METRICS_FILE, FINAL_EVAL_FILE, *FIGURE4_FILES)
 
 
-def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
+@dataclass
+class Export:
+    copied: list[Path]  # the run copies below DEST, one per run below ROOT
+    removed: list[Path]  # copies of runs no longer below ROOT, removed from DEST
+
+
+def export_runs(root: str | Path, dest: str | Path) -> Export:
     """Copy the results of every run below ``root`` (``config.json``, ``metrics.csv`` and, once
     finished, ``final_eval.json``; a Figure-4 panel if the run has one) to the same relative
     place below ``dest``, so that a report can be rebuilt from a small tree kept in version
-    control (``s3rl-report DEST``). A file an earlier export left in a run's copy that the
-    run no longer has is removed. Returns the copied run directories.
+    control (``s3rl-report DEST``). ``dest`` then mirrors the runs: a file an earlier export
+    left in a run's copy that the run no longer has is removed, and so is the copy of a run that
+    is gone from ``root`` (its exported files, and its directory once empty).
     ``report.build.export_embedding_panels`` adds the panels drawn from the checkpoints."""
     root, dest = Path(root), Path(dest)
     runs = find_runs(root)
@@ -205,7 +214,18 @@ def export_runs(root: str | Path, dest: str | Path) -> list[Path]:
                 # must say what the run says. Panels stay: export_embedding_panels owns them.
                 (target / name).unlink(missing_ok=True)
         copied.append(target)
-    return copied
+    kept = {path.resolve() for path in copied}
+    removed = []
+    for config in sorted(dest.rglob(CONFIG_FILE)):
+        stale = config.parent
+        if stale.resolve() in kept or not (stale / METRICS_FILE).is_file():
+            continue
+        for name in EXPORTED_FILES:
+            (stale / name).unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # other files of the user's stay, and their folder
+            stale.rmdir()
+        removed.append(stale)
+    return Export(copied, removed)
 
 
 def flatten(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:

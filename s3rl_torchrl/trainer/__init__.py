@@ -24,6 +24,7 @@ from s3rl_torchrl.trainer.config import (
     register_configs,
     validate,
 )
+from s3rl_torchrl.trainer.contrastive import ContrastivePhase
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
 from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, compile_loss, train
 from s3rl_torchrl.trainer.multiseed import MultiSeedResult, MultiSeedTrainer, train_seeds
@@ -34,6 +35,7 @@ __all__ = [
     "CollectorConfig",
     "ConfigError",
     "ContrastiveConfig",
+    "ContrastivePhase",
     "Counters",
     "EvalConfig",
     "EvalResult",

@@ -7,19 +7,20 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
 from torch import nn
 from torchrl.data import LazyTensorStorage, SamplerWithoutReplacement, TensorDictReplayBuffer
+from torchrl.data.tensor_specs import TensorSpec
 from torchrl.envs import EnvBase
 from torchrl.objectives import ClipPPOLoss, DDPGLoss, LossModule, SoftUpdate
 
 from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.envs import make_env
 from s3rl_torchrl.modules import (
-    ContrastivePhase,
     ReLU,
     build_cost_qvalue_network,
     build_ddpg_exploration,
@@ -52,13 +53,18 @@ from s3rl_torchrl.objectives import (
     ppo_lag_update,
     sac_lag_update,
 )
-from s3rl_torchrl.trainer.config import AlgoConfig, TrainConfig
+from s3rl_torchrl.trainer.contrastive import ContrastivePhase
 from s3rl_torchrl.trainer.schedule import (
+    OffPolicySchedule,
     OnPolicySchedule,
     ReplayUpdates,
     RolloutUpdates,
+    UpdateSchedule,
     collector_batch_frames,
 )
+
+if TYPE_CHECKING:  # config.py imports FAMILIES from here
+    from s3rl_torchrl.trainer.config import AlgoConfig, NetworkConfig, TrainConfig
 
 # Every registered task has one cost signal; the loss and the controllers take m >= 1.
 NUM_COSTS = 1
@@ -142,193 +148,225 @@ def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianControlle
     return None
 
 
+@dataclass
+class Networks:
+    """The run's network settings and the env's sizes: every family builds its actor and
+    critics from them alike."""
+
+    net: NetworkConfig
+    observation_dim: int
+    action_spec: TensorSpec
+
+    @property
+    def action_dim(self) -> int:
+        return self.action_spec.shape[-1]
+
+    @property
+    def activation(self) -> type[nn.Module]:
+        return ACTIVATIONS[self.net.activation]
+
+    def critics(self, builder: Callable, count: int) -> list:
+        """``count`` critics, one module each, so each keeps its own orthogonal init (FSRL); a
+        single module would be copied and re-initialised by torchrl."""
+        hidden = tuple(self.net.critic_hidden)
+        return [
+            builder(self.observation_dim, self.action_dim, hidden, activation_class=self.activation)
+            for _ in range(count)
+        ]
+
+    def stochastic_actor(self) -> TensorDictModuleBase:
+        """The paper's policy encoder + tanh-Gaussian head (SAC and PPO families)."""
+        return build_s3rl_actor(
+            self.observation_dim,
+            self.action_spec,
+            hidden=tuple(self.net.actor_hidden),
+            log_std_bounds=(self.net.log_std_min, self.net.log_std_max),
+            activation=self.activation,
+        )
+
+
+def build_sac_agent(algo: AlgoConfig, nets: Networks, compile_fn: CompileFn | None) -> Agent:
+    """SAC family: ``SACLagLoss`` (exactly ``SACLoss`` when unconstrained), double critics."""
+    constrained = algo.lagrangian != "none"
+    actor = nets.stochastic_actor()
+    num_qvalue_nets = 2  # double critics (paper, FSRL)
+    qvalue = nets.critics(build_qvalue_network, num_qvalue_nets)
+    # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only
+    # cost time, so the loss is built without them (it is then exactly SACLoss).
+    cost_qvalue = (
+        nets.critics(build_cost_qvalue_network, num_qvalue_nets * NUM_COSTS)
+        if constrained
+        else None
+    )
+    loss = SACLagLoss(
+        actor,
+        qvalue,
+        cost_qvalue,
+        num_costs=NUM_COSTS if constrained else 0,
+        num_qvalue_nets=num_qvalue_nets,
+        alpha_init=algo.alpha_init,
+        fixed_alpha=not algo.auto_alpha,
+        action_spec=nets.action_spec,
+        entropy_in_cost_target=algo.cost_entropy,
+        rescaling=algo.rescaling,
+        lagrangian_init=algo.lagrangian_init if constrained else 0.0,
+    )
+    loss.make_value_estimator(gamma=algo.gamma)
+    target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
+    optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
+    update = _sac_update(
+        loss, optimizers, target_updater, algo.update_order, compile_fn or (lambda fn: fn)
+    )
+    log_keys = tuple(k for k in loss.out_keys if k != "lagrangian")
+    return Agent(actor, actor, loss, target_updater, optimizers, None, None, update, log_keys)
+
+
+def build_ddpg_agent(algo: AlgoConfig, nets: Networks, compile_fn: CompileFn | None) -> Agent:
+    """DDPG family: ``DDPGLagLoss`` (torchrl's ``DDPGLoss`` when unconstrained), one critic of
+    each kind (FSRL), the deterministic actor plus Gaussian exploration noise."""
+    actor = build_deterministic_actor(
+        nets.observation_dim,
+        nets.action_spec,
+        hidden=tuple(nets.net.actor_hidden),
+        activation=nets.activation,
+    )
+    policy = build_ddpg_exploration(actor, nets.action_spec, sigma=algo.exploration_noise)
+    (value,) = nets.critics(build_qvalue_network, 1)
+    if algo.lagrangian != "none":
+        (cost_value,) = nets.critics(build_cost_qvalue_network, 1)
+        loss = DDPGLagLoss(
+            actor,
+            value,
+            cost_value,
+            num_costs=NUM_COSTS,
+            rescaling=algo.rescaling,
+            lagrangian_init=algo.lagrangian_init,
+        )
+        log_keys = ("loss_actor", "loss_value", "reward_q", "loss_cost_value", "cost_q")
+    else:  # lambda fixed at 0: DDPGLagLoss would equal DDPGLoss with an unused cost critic
+        loss = DDPGLoss(actor, value, delay_actor=True, delay_value=True, loss_function="l2")
+        log_keys = ("loss_actor", "loss_value", "reward_q")
+    loss.make_value_estimator(gamma=algo.gamma)
+    target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
+    optimizers = make_ddpg_lag_optimizers(loss, algo.actor_lr, algo.critic_lr)
+
+    def update(batch: TensorDictBase) -> TensorDictBase:
+        return ddpg_lag_update(loss, batch, optimizers, target_updater)
+
+    return Agent(policy, actor, loss, target_updater, optimizers, None, None, update, log_keys)
+
+
+def build_ppo_agent(algo: AlgoConfig, nets: Networks, compile_fn: CompileFn | None) -> Agent:
+    """PPO family: ``PPOLagLoss`` (torchrl's ``ClipPPOLoss`` when unconstrained) with the
+    paper's stochastic actor (the policy encoder the contrastive phase trains) and one
+    state-value network per signal (FSRL's PPO-Lag)."""
+    actor = nets.stochastic_actor()
+    hidden = tuple(nets.net.critic_hidden)
+    value = build_value_network(nets.observation_dim, hidden, activation_class=nets.activation)
+    # FSRL's PPO-Lag settings (config.AlgoConfig, docs/objectives.md): no entropy bonus,
+    # squared-error critics weighted critic_coeff, advantages standardised per minibatch.
+    ppo_kwargs = dict(
+        clip_epsilon=algo.clip_epsilon,
+        entropy_bonus=False,
+        critic_coeff=algo.critic_coeff,
+        loss_critic_type="l2",
+        normalize_advantage=True,
+    )
+    log_keys = ("loss_objective", "loss_critic", "kl_approx", "clip_fraction")
+    if algo.lagrangian != "none":
+        cost_value = build_value_network(
+            nets.observation_dim, hidden, out_key=COST_VALUE_KEY, activation_class=nets.activation
+        )
+        loss = PPOLagLoss(
+            actor,
+            value,
+            cost_value,
+            cost_surrogate=algo.cost_surrogate,
+            rescaling=algo.rescaling,
+            lagrangian_init=algo.lagrangian_init,
+            **ppo_kwargs,
+        )
+        log_keys += ("loss_cost_critic",)
+    else:  # lambda fixed at 0: PPOLagLoss would equal ClipPPOLoss with an unused cost critic
+        loss = ClipPPOLoss(actor, value, **ppo_kwargs)
+    loss.make_value_estimator(gamma=algo.gamma, lmbda=algo.gae_lambda)
+    optimizers = make_ppo_lag_optimizers(loss, algo.actor_lr, algo.critic_lr)
+
+    def update(batch: TensorDictBase) -> TensorDictBase:
+        return ppo_lag_update(loss, batch, optimizers, algo.max_grad_norm)
+
+    def prepare(batch: TensorDictBase) -> TensorDictBase:
+        return compute_ppo_advantages(loss, batch)
+
+    return Agent(actor, actor, loss, None, optimizers, None, None, update, log_keys, prepare)
+
+
+@dataclass(frozen=True)
+class AlgoFamily:
+    """An algorithm family: when its gradient steps happen (trainer/schedule.py) and how its
+    agent (actor, critics, loss, optimisers, gradient step) is built. Adding a family is one
+    entry here and one builder; adding an algorithm of a family is one entry of
+    ``config.ALGO_FAMILIES`` and one YAML in ``configs/algo/``."""
+
+    schedule: type[UpdateSchedule]
+    build_agent: Callable[[AlgoConfig, Networks, CompileFn | None], Agent]
+
+
+FAMILIES: dict[str, AlgoFamily] = {
+    "sac": AlgoFamily(OffPolicySchedule, build_sac_agent),
+    "ddpg": AlgoFamily(OffPolicySchedule, build_ddpg_agent),
+    "ppo": AlgoFamily(OnPolicySchedule, build_ppo_agent),
+}
+
+
 def build_agent(
     cfg: TrainConfig,
     env: EnvBase,
     replay_buffer: TensorDictReplayBuffer | None,
     compile_fn: CompileFn | None = None,
 ) -> Agent:
-    """Actor, critics, loss, optimisers, update, Lagrangian and contrastive phase.
+    """Actor, critics, loss, optimisers, update (the family's builder, :data:`FAMILIES`), then
+    the Lagrangian and the contrastive phase, which every family takes alike.
 
-    ``algo.family`` (config.ALGO_FAMILIES) picks SAC (``SACLagLoss``), DDPG (``DDPGLagLoss``,
-    or torchrl's ``DDPGLoss`` when unconstrained) or PPO (``PPOLagLoss``, or torchrl's
-    ``ClipPPOLoss`` when unconstrained); ``compile_fn`` (e.g. ``torch.compile``) wraps the SAC
-    family's loss calls.
+    ``compile_fn`` (e.g. ``torch.compile``) wraps the SAC family's loss calls.
     """
-    algo, net = cfg.algo, cfg.network
-    observation_dim = env.observation_spec["observation"].shape[-1]
-    action_spec = env.action_spec_unbatched
-    action_dim = action_spec.shape[-1]
-    activation = ACTIVATIONS[net.activation]
-
-    # One module per critic (a list), so each keeps its own orthogonal init (FSRL); a single
-    # module would be copied and re-initialised by torchrl.
-    def critics(builder, count: int) -> list:
-        return [
-            builder(
-                observation_dim, action_dim, tuple(net.critic_hidden), activation_class=activation
-            )
-            for _ in range(count)
-        ]
-
-    def stochastic_actor():
-        """The paper's policy encoder + tanh-Gaussian head (SAC and PPO families)."""
-        return build_s3rl_actor(
-            observation_dim,
-            action_spec,
-            hidden=tuple(net.actor_hidden),
-            log_std_bounds=(net.log_std_min, net.log_std_max),
-            activation=activation,
-        )
-
-    constrained = algo.lagrangian != "none"
-    prepare = None
-    if algo.family == "ppo":
-        # The paper's stochastic actor (the policy encoder the contrastive phase trains) and
-        # one state-value network per signal (FSRL's PPO-Lag).
-        actor = stochastic_actor()
-        policy = actor
-        hidden = tuple(net.critic_hidden)
-        value = build_value_network(observation_dim, hidden, activation_class=activation)
-        # FSRL's PPO-Lag settings (config.AlgoConfig, docs/objectives.md): no entropy bonus,
-        # squared-error critics weighted critic_coeff, advantages standardised per minibatch.
-        ppo_kwargs = dict(
-            clip_epsilon=algo.clip_epsilon,
-            entropy_bonus=False,
-            critic_coeff=algo.critic_coeff,
-            loss_critic_type="l2",
-            normalize_advantage=True,
-        )
-        if constrained:
-            cost_value = build_value_network(
-                observation_dim, hidden, out_key=COST_VALUE_KEY, activation_class=activation
-            )
-            loss = PPOLagLoss(
-                actor,
-                value,
-                cost_value,
-                cost_surrogate=algo.cost_surrogate,
-                rescaling=algo.rescaling,
-                lagrangian_init=algo.lagrangian_init,
-                **ppo_kwargs,
-            )
-        else:  # lambda fixed at 0: PPOLagLoss would equal ClipPPOLoss with an unused cost critic
-            loss = ClipPPOLoss(actor, value, **ppo_kwargs)
-        loss.make_value_estimator(gamma=algo.gamma, lmbda=algo.gae_lambda)
-        target_updater = None
-        optimizers = make_ppo_lag_optimizers(loss, algo.actor_lr, algo.critic_lr)
-
-        def update(batch: TensorDictBase) -> TensorDictBase:
-            return ppo_lag_update(loss, batch, optimizers, algo.max_grad_norm)
-
-        def prepare(batch: TensorDictBase) -> TensorDictBase:
-            return compute_ppo_advantages(loss, batch)
-
-        log_keys = ("loss_objective", "loss_critic", "kl_approx", "clip_fraction")
-        if constrained:
-            log_keys += ("loss_cost_critic",)
-    elif algo.family == "ddpg":
-        actor = build_deterministic_actor(
-            observation_dim, action_spec, hidden=tuple(net.actor_hidden), activation=activation
-        )
-        policy = build_ddpg_exploration(actor, action_spec, sigma=algo.exploration_noise)
-        (value,) = critics(build_qvalue_network, 1)  # one critic of each kind (FSRL)
-        if constrained:
-            (cost_value,) = critics(build_cost_qvalue_network, 1)
-            loss = DDPGLagLoss(
-                actor,
-                value,
-                cost_value,
-                num_costs=NUM_COSTS,
-                rescaling=algo.rescaling,
-                lagrangian_init=algo.lagrangian_init,
-            )
-        else:  # lambda fixed at 0: DDPGLagLoss would equal DDPGLoss with an unused cost critic
-            loss = DDPGLoss(actor, value, delay_actor=True, delay_value=True, loss_function="l2")
-        loss.make_value_estimator(gamma=algo.gamma)
-        target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
-        optimizers = make_ddpg_lag_optimizers(loss, algo.actor_lr, algo.critic_lr)
-
-        def update(batch: TensorDictBase) -> TensorDictBase:
-            return ddpg_lag_update(loss, batch, optimizers, target_updater)
-
-        log_keys = ("loss_actor", "loss_value", "reward_q")
-        if constrained:
-            log_keys += ("loss_cost_value", "cost_q")
-    else:
-        actor = stochastic_actor()
-        policy = actor
-        num_qvalue_nets = 2  # double critics (paper, FSRL)
-        qvalue = critics(build_qvalue_network, num_qvalue_nets)
-        # Unconstrained runs (sac, s3rl_nolag) have lambda fixed at 0: cost critics would only
-        # cost time, so the loss is built without them (it is then exactly SACLoss).
-        cost_qvalue = (
-            critics(build_cost_qvalue_network, num_qvalue_nets * NUM_COSTS)
-            if constrained
-            else None
-        )
-        loss = SACLagLoss(
-            actor,
-            qvalue,
-            cost_qvalue,
-            num_costs=NUM_COSTS if constrained else 0,
-            num_qvalue_nets=num_qvalue_nets,
-            alpha_init=algo.alpha_init,
-            fixed_alpha=not algo.auto_alpha,
-            action_spec=action_spec,
-            entropy_in_cost_target=algo.cost_entropy,
-            rescaling=algo.rescaling,
-            lagrangian_init=algo.lagrangian_init if constrained else 0.0,
-        )
-        loss.make_value_estimator(gamma=algo.gamma)
-        target_updater = ForeachSoftUpdate(loss, tau=algo.tau)
-        optimizers = make_sac_lag_optimizers(loss, algo.actor_lr, algo.critic_lr, algo.alpha_lr)
-        update = _sac_update(
-            loss, optimizers, target_updater, algo.update_order, compile_fn or (lambda fn: fn)
-        )
-        log_keys = tuple(k for k in loss.out_keys if k != "lagrangian")
-    lagrangian = None
-    if constrained:
-        lagrangian = LagrangianUpdater(
+    algo = cfg.algo
+    nets = Networks(cfg.network, env.observation_spec["observation"].shape[-1],
+                    env.action_spec_unbatched)
+    agent = FAMILIES[algo.family].build_agent(algo, nets, compile_fn)
+    if algo.lagrangian != "none":
+        agent.lagrangian = LagrangianUpdater(
             build_lagrangian(algo, cfg.task.cost_limit),
-            loss,
+            agent.loss,
             cadence=algo.lagrangian_cadence,
             window=algo.lagrangian_window,
             warmup_frames=algo.lagrangian_warmup_frames,
         )
-
-    contrastive = None
     if algo.contrastive:
-        if replay_buffer is None:
-            raise ValueError(
-                "the contrastive phase needs the labelled buffer it samples from (off-policy: "
-                "the replay buffer; on-policy: the FIFO of recent labelled states)"
-            )
-        c = algo.contrastive_cfg
-        infonce = SafetyInfoNCELoss(
-            get_policy_encoder(actor),
-            temperature=c.temperature,
-            momentum_encoder=c.momentum_tau is not None,
+        agent.contrastive = build_contrastive_phase(algo, agent.actor, replay_buffer)
+    return agent
+
+
+def build_contrastive_phase(
+    algo: AlgoConfig, actor: TensorDictModuleBase, replay_buffer: TensorDictReplayBuffer | None
+) -> ContrastivePhase:
+    """S3RL's phase on the actor's policy encoder, sampling triplets from the labelled buffer."""
+    if replay_buffer is None:
+        raise ValueError(
+            "the contrastive phase needs the labelled buffer it samples from (off-policy: "
+            "the replay buffer; on-policy: the FIFO of recent labelled states)"
         )
-        view = SafeUnsafeSampler.contrastive_view(replay_buffer, c.batch_size)
-        updater = None
-        if c.momentum_tau is not None:
-            updater = ForeachSoftUpdate(infonce, tau=c.momentum_tau)
-        contrastive = ContrastivePhase(
-            infonce, view, c.lr, num_steps=c.steps, target_updater=updater
-        )
-    return Agent(
-        policy,
-        actor,
-        loss,
-        target_updater,
-        optimizers,
-        lagrangian,
-        contrastive,
-        update,
-        log_keys,
-        prepare,
+    c = algo.contrastive_cfg
+    infonce = SafetyInfoNCELoss(
+        get_policy_encoder(actor),
+        temperature=c.temperature,
+        momentum_encoder=c.momentum_tau is not None,
     )
+    view = SafeUnsafeSampler.contrastive_view(replay_buffer, c.batch_size)
+    updater = None
+    if c.momentum_tau is not None:
+        updater = ForeachSoftUpdate(infonce, tau=c.momentum_tau)
+    return ContrastivePhase(infonce, view, c.lr, num_steps=c.steps, target_updater=updater)
 
 
 def _sac_update(

@@ -18,17 +18,13 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
 from s3rl_torchrl.objectives.lagrangian import LAGRANGIAN_CADENCES
-from s3rl_torchrl.trainer.schedule import (
-    OffPolicySchedule,
-    OnPolicySchedule,
-    UpdateSchedule,
-    collector_batch_frames,
-)
+from s3rl_torchrl.trainer.builders import FAMILIES
+from s3rl_torchrl.trainer.schedule import UpdateSchedule, collector_batch_frames
 
-# The algorithm registry: `algo=<name>` (configs/algo/<name>.yaml) -> its family, which decides
-# the actor, the loss and the gradient step (trainer/builders.py) and, through
-# FAMILY_SCHEDULES, when gradient steps happen (trainer/schedule.py). Adding an algorithm of an
-# existing family is one entry here and one YAML.
+# The algorithm registry: `algo=<name>` (configs/algo/<name>.yaml) -> its family, whose entry in
+# builders.FAMILIES builds the actor, the loss and the gradient step and says when gradient
+# steps happen (trainer/schedule.py). Adding an algorithm of an existing family is one entry
+# here and one YAML.
 ALGO_FAMILIES = {
     "s3rl": "sac",
     "sac_lag": "sac",
@@ -42,13 +38,9 @@ ALGO_FAMILIES = {
     "s3rl_ppo_lag": "ppo",
 }
 ALGO_NAMES = tuple(ALGO_FAMILIES)
-# family -> its update schedule: off-policy (replay buffer, warm-up, update_per_step gradient
-# steps per frame) or on-policy (GAE on each collect, ppo_epochs passes of minibatches).
-FAMILY_SCHEDULES: dict[str, type[UpdateSchedule]] = {
-    "sac": OffPolicySchedule,
-    "ddpg": OffPolicySchedule,
-    "ppo": OnPolicySchedule,
-}
+# The algorithms without a Lagrange multiplier (their YAML sets `lagrangian: none`): a preset
+# that picks the controller (experiment=safe) leaves them unconstrained (`s3rl_lagrangian`).
+UNCONSTRAINED_ALGOS = ("sac", "s3rl_nolag", "ddpg", "ppo")
 COST_SURROGATES = ("unclipped", "clipped")
 LAGRANGIAN_CHOICES = ("pid", "learned", "none")
 UPDATE_ORDERS = ("joint", "fsrl")
@@ -87,6 +79,17 @@ def _check_cpp_compiler(path: str) -> None:
             f"torch.compile on CPU needs a C++ compiler and none of {tried} runs (or set CXX); "
             "install one (Debian/Ubuntu: apt-get install g++) or pass compile=false",
         )
+
+
+def _check_finite(obj: Any, path: str) -> None:
+    """Every float field of a config (nested dataclasses included) is a finite number: NaN
+    passes every range check (its comparisons are all false) and would fail deep inside."""
+    for f in fields(obj):
+        value, name = getattr(obj, f.name), f"{path}.{f.name}" if path else f.name
+        if is_dataclass(value):
+            _check_finite(value, name)
+        elif isinstance(value, float) and not math.isfinite(value):
+            _fail(name, value, "must be a finite number")
 
 
 def _check_choice(path: str, value: Any, choices: tuple) -> None:
@@ -234,8 +237,8 @@ class AlgoConfig:
         return ALGO_FAMILIES.get(self.name, "")
 
     def schedule(self, collector: CollectorConfig) -> UpdateSchedule:
-        """The family's update schedule for these collector settings (:data:`FAMILY_SCHEDULES`)."""
-        return FAMILY_SCHEDULES[self.family](collector, self)
+        """The family's update schedule for these collector settings (``builders.FAMILIES``)."""
+        return FAMILIES[self.family].schedule(collector, self)
 
     def check(self, path: str) -> None:
         _check_choice(f"{path}.name", self.name, ALGO_NAMES)
@@ -412,6 +415,7 @@ class TrainConfig:
 
     def check(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
+        _check_finite(self, path)
         for name in ("task", "algo", "network", "collector", "eval", "logger"):
             getattr(self, name).check(prefix + name)
         _check_choice(prefix + "device", self.device, DEVICES)
@@ -486,6 +490,13 @@ def episode_frames(task_name: str, episodes: int) -> int:
     return int(episodes) * get_task(task_name).max_episode_steps
 
 
+def lagrangian_for(algo_name: str, controller: str) -> str:
+    """``controller`` for an algorithm with a Lagrange multiplier, ``none`` for the others
+    (``${s3rl_lagrangian:${algo.name},learned}`` in ``experiment=safe``)."""
+    _check_choice("algo.name", algo_name, ALGO_NAMES)
+    return "none" if algo_name in UNCONSTRAINED_ALGOS else controller
+
+
 def round_up(value: int, multiple: int) -> int:
     """``value`` rounded up to a multiple of ``multiple``: FSRL's epoch runs whole collects until
     ``step_per_epoch`` frames are reached (``${s3rl_round_up:10000,${collector.frames_per_batch}}``)."""
@@ -495,10 +506,12 @@ def round_up(value: int, multiple: int) -> int:
 def register_configs() -> None:
     """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore,
     and the resolvers the YAMLs use: ``s3rl_run_name`` (default output directories),
-    ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs)."""
+    ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs),
+    ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
     OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)
     OmegaConf.register_new_resolver("s3rl_round_up", round_up, replace=True)
+    OmegaConf.register_new_resolver("s3rl_lagrangian", lagrangian_for, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(name="eval_schema", node=EvalRunConfig)

@@ -42,8 +42,8 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
+from s3rl_torchrl.diagnostics.probe import replay_probe
 from s3rl_torchrl.modules import get_policy_encoder
-from s3rl_torchrl.report.probe import replay_probe
 from s3rl_torchrl.trainer.builders import (
     Agent,
     build_agent,

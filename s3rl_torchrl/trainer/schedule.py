@@ -3,8 +3,8 @@
 A schedule is the rule the loop follows after each collected batch, and the count that rule
 gives for a config without collecting (:meth:`UpdateSchedule.planned_gradient_steps`), so a
 config that would never take a gradient step is refused before anything is built
-(:meth:`~s3rl_torchrl.trainer.config.TrainConfig.check`) and the final table can name the steps
-taken. The family registry (``config.FAMILY_SCHEDULES``) maps each family to its schedule; the
+(``TrainConfig.check``, trainer/config.py) and the final table can name the steps
+taken. The family registry (``builders.FAMILIES``) gives each family its schedule; the
 loop (trainer/loop.py) only calls the schedule's methods:
 
 - :class:`OffPolicySchedule` (SAC, DDPG families): every batch goes into one replay buffer; the
@@ -25,22 +25,40 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 from tensordict import TensorDictBase
 
 if TYPE_CHECKING:
     from torchrl.data import TensorDictReplayBuffer
 
-    from s3rl_torchrl.trainer.config import AlgoConfig, CollectorConfig
+
+# What a schedule reads of a run's config. This module owns these types, so it imports nothing
+# of trainer/config.py (whose CollectorConfig and AlgoConfig satisfy them), and config.py can
+# import the schedules without a cycle.
+class CollectorSettings(Protocol):
+    num_envs: int
+    frames_per_batch: int
+    total_frames: int
+    init_random_frames: int
 
 
-def collector_batch_frames(collector: CollectorConfig) -> int:
+class AlgoSettings(Protocol):
+    batch_size: int
+    buffer_size: int
+    n_step: int
+    ppo_epochs: int
+    update_per_step: float
+
+    def schedule(self, collector: CollectorSettings) -> UpdateSchedule: ...
+
+
+def collector_batch_frames(collector: CollectorSettings) -> int:
     """Frames per collected batch: torchrl's collector rounds up to whole steps of every env."""
     return math.ceil(collector.frames_per_batch / collector.num_envs) * collector.num_envs
 
 
-def collected_batches(collector: CollectorConfig) -> int:
+def collected_batches(collector: CollectorSettings) -> int:
     """Batches a run collects: the last one may run past ``total_frames`` (whole batches)."""
     return math.ceil(collector.total_frames / collector_batch_frames(collector))
 
@@ -54,7 +72,7 @@ class UpdateSchedule:
 
     name: ClassVar[str]
 
-    def __init__(self, collector: CollectorConfig, algo: AlgoConfig) -> None:
+    def __init__(self, collector: CollectorSettings, algo: AlgoSettings) -> None:
         self.collector, self.algo = collector, algo
 
     def warmup_frames(self) -> int:
@@ -155,7 +173,7 @@ class OnPolicySchedule(UpdateSchedule):
 
 
 def planned_gradient_steps(
-    collector: CollectorConfig, algo: AlgoConfig, stop_at: int | None = None
+    collector: CollectorSettings, algo: AlgoSettings, stop_at: int | None = None
 ) -> int:
     """The number of gradient steps a run of this config takes (its family's schedule)."""
     return algo.schedule(collector).planned_gradient_steps(stop_at)

@@ -14,7 +14,6 @@ from torchrl.objectives import DDPGLoss, SoftUpdate
 
 from s3rl_torchrl.data.sampler import SafeUnsafeSampler
 from s3rl_torchrl.modules import (
-    ContrastivePhase,
     build_ddpg_exploration,
     build_deterministic_actor,
     build_qvalue_network,
@@ -26,6 +25,7 @@ from s3rl_torchrl.objectives import (
     ddpg_lag_update,
     make_ddpg_lag_optimizers,
 )
+from s3rl_torchrl.trainer import ContrastivePhase
 from tests.objectives._gradients import moved
 
 OBS, ACT, HIDDEN, GAMMA = 5, 2, (16, 16), 0.9

@@ -148,12 +148,14 @@ def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_pat
                  "--no-embeddings"]) == 2
 
 
-def test_export_again_removes_what_the_runs_no_longer_have(tmp_path, make_run, monkeypatch):
+def test_export_again_removes_what_the_runs_no_longer_have(
+    tmp_path, make_run, monkeypatch, capsys
+):
     """A re-export mirrors the runs: a final_eval.json of a run that is unfinished now goes,
     and a group keeps one Figure-4 panel (the one drawn now), not an earlier one on another
     seed."""
+    from s3rl_torchrl.diagnostics.probe import ProbeResult
     from s3rl_torchrl.report import embeddings
-    from s3rl_torchrl.report.probe import ProbeResult
 
     _sweep(tmp_path, make_run)
     kept = tmp_path / "kept"
@@ -176,6 +178,23 @@ def test_export_again_removes_what_the_runs_no_longer_have(tmp_path, make_run, m
     stored = embeddings.load_panel(kept / "s3rl_seed2")
     np.testing.assert_array_equal(stored.safe, panel.safe)
     assert stored.probe.accuracy == 0.75
+    # A run gone from the source loses its copy (a file of the user's beside it stays).
+    gone = kept / "s3rl_seed9"
+    gone.mkdir()
+    for name in ("config.json", "metrics.csv", "final_eval.json"):
+        (gone / name).write_text("{}")
+    (kept / "s3rl_seed8").mkdir()
+    (kept / "s3rl_seed8" / "config.json").write_text("{}")
+    (kept / "s3rl_seed8" / "metrics.csv").write_text("frames\n")
+    (kept / "s3rl_seed8" / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main([str(tmp_path / "sweep"), "--export-runs", str(kept), "--no-embeddings"]) == 0
+    assert not gone.exists() and sorted(p.name for p in (kept / "s3rl_seed8").iterdir()) == [
+        "notes.txt"
+    ]
+    summary = capsys.readouterr().out
+    assert "removed 2 run copies no longer in" in summary and "s3rl_seed9" in summary
+    assert (kept / "s3rl_seed4" / "metrics.csv").is_file()  # runs still there stay
     # sac_lag has no checkpoint: nothing drawn, nothing removed.
     assert not any((kept / f"sac_lag_seed{s}" / embeddings.PANEL_FILES[0]).exists()
                    for s in (1, 2, 3))
@@ -207,7 +226,7 @@ def test_training_logs_the_probe_every_epoch(tiny_runs):
 
 def test_the_probe_does_not_change_training(tiny_runs, tmp_path, monkeypatch):
     """The probe draws from its own generator: a run without it trains exactly the same."""
-    from s3rl_torchrl.report.probe import ProbeResult
+    from s3rl_torchrl.diagnostics.probe import ProbeResult
     from s3rl_torchrl.trainer import loop
 
     nan = float("nan")

@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
+from s3rl_torchrl.diagnostics.probe import ProbeResult
 from s3rl_torchrl.report.embeddings import EmbeddingPanel, load_panel, save_panel, tsne_2d
-from s3rl_torchrl.report.probe import ProbeResult
 
 
 def test_panel_round_trip_keeps_an_unfitted_probe_as_nan(tmp_path):

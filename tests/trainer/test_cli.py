@@ -57,6 +57,20 @@ def test_train_then_evaluate(tmp_path):
     assert len(frames) == 8 and frames[0].ndim == 3 and frames[0].std() > 0
 
 
+def test_a_compiled_run_prints_no_third_party_noise(tmp_path):
+    # What `make train` printed: tensordict's FutureWarning about a torch._dynamo option, its
+    # lock_() warning under torch.compile (ours: SACLagLoss no longer locks inside the graph)
+    # and MuJoCo's settotalmass deprecation (Gymnasium's half_cheetah.xml). None of them now.
+    out = run(
+        "s3rl-train", *TINY, "algo=sac_lag", "compile=true", f"hydra.run.dir={tmp_path / 'r'}",
+        cwd=tmp_path,
+    )
+    assert out.returncode == 0, out.stderr
+    for noise in ("inline_inbuilt_nn_modules", "lock_()", "settotalmass"):
+        assert noise not in out.stderr + out.stdout, noise
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
 def test_bad_override_fails_before_training(tmp_path):
     out = run("s3rl-train", *TINY, "algo.update_per_step=-2", f"hydra.run.dir={tmp_path / 'r'}",
               cwd=tmp_path)

@@ -180,6 +180,13 @@ def test_pid_omnisafe_is_sacpid_per_gradient_step(compose):
         ("network.activation=gelu", "allowed values are relu, tanh, elu, silu"),
         ("collector.frames_per_epoch=150", "multiple of collector.frames_per_batch"),
         ("algo.contrastive_cfg.temperature=0", "'algo.contrastive_cfg.temperature'"),
+        # NaN passes every range comparison: each float field is checked for it on its own.
+        ("task.cost_limit=nan", "Invalid value nan for 'task.cost_limit': must be a finite"),
+        ("algo.pid.kd=inf", "Invalid value inf for 'algo.pid.kd': must be a finite number"),
+        ("network.log_std_max=nan", "'network.log_std_max': must be a finite number"),
+        ("algo.contrastive_cfg.lr=nan", "'algo.contrastive_cfg.lr': must be a finite number"),
+        ("algo.lagrangian_cadence=epoch", "'algo.lagrangian_cadence': allowed values are collect"),
+        ("algo.lagrangian_window=0", "'algo.lagrangian_window': must be in [1"),
     ],
 )
 def test_bad_values_name_the_field_and_the_valid_choices(override, message, compose):

@@ -13,7 +13,7 @@ from tensordict.nn import TensorDictModule
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
 from s3rl_torchrl.data import SafeUnsafeSampler
-from s3rl_torchrl.report.probe import linear_probe, replay_probe
+from s3rl_torchrl.diagnostics.probe import linear_probe, replay_probe
 
 
 def test_separable_embeddings_are_read_off_almost_perfectly():

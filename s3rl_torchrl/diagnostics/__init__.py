@@ -1,0 +1,10 @@
+"""Diagnostics both the trainer (every epoch) and the results toolkit (``s3rl-report``) compute:
+the linear probe of the policy encoder (does the embedding separate safe from unsafe states?).
+
+It sits below :mod:`s3rl_torchrl.trainer` and :mod:`s3rl_torchrl.report` and imports neither
+(docs/architecture.md).
+"""
+
+from s3rl_torchrl.diagnostics.probe import ProbeResult, linear_probe, replay_probe
+
+__all__ = ["ProbeResult", "linear_probe", "replay_probe"]
