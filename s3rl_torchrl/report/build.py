@@ -9,12 +9,14 @@ from pathlib import Path
 
 from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
 from s3rl_torchrl.report.runs import (
+    PROTOCOLS,
     RUN_SPECIFIC_KEYS,
     Run,
     RunGroup,
     config_differences,
     find_runs,
     group_runs,
+    under_protocol,
 )
 from s3rl_torchrl.report.stats import (
     WITHIN_SEED_SHARE_MIN,
@@ -81,23 +83,32 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = ""
     return lines
 
 
+def _protocol_groups(group: RunGroup):
+    """(protocol label, the group read under it) for every protocol its runs were evaluated
+    with (``runs.PROTOCOLS``)."""
+    for protocol, label in PROTOCOLS.items():
+        read = under_protocol(group, protocol)
+        if read is not None and read.finished:
+            yield label, read
+
+
 def _table1(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     rows = []
     for task, groups in by_task.items():
         for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
-            if not group.finished:
-                continue
-            s = summarize(group)
-            marker = f" {OVER_LIMIT}" if s.over_limit else ""
-            rows.append([
-                task, group.label, str(len(s.seeds)),
-                _ms(s.reward_seeds), _ms(s.reward_episodes),
-                _ms(s.cost_seeds) + marker, _ms(s.cost_episodes),
-                f"{s.cost_limit:g}", _ms(s.length_seeds, 1), _ms(s.safe_occupancy_seeds, 1),
-            ])
+            for protocol, read in _protocol_groups(group):
+                s = summarize(read)
+                marker = f" {OVER_LIMIT}" if s.over_limit else ""
+                rows.append([
+                    task, group.label, str(len(s.seeds)),
+                    _ms(s.reward_seeds), _ms(s.reward_episodes),
+                    _ms(s.cost_seeds) + marker, _ms(s.cost_episodes),
+                    f"{s.cost_limit:g}", _ms(s.length_seeds, 1), _ms(s.safe_occupancy_seeds, 1),
+                    protocol,
+                ])
     header = ["task", "algo", "seeds", "reward (seeds)", "reward (episodes)", "cost (seeds)",
-              "cost (episodes)", "cost limit", "length", "safe steps (%)"]
-    return _table(header, rows, "llrrrrrrrr")
+              "cost (episodes)", "cost limit", "length", "safe steps (%)", "evaluated"]
+    return _table(header, rows, "llrrrrrrrrl")
 
 
 def _differences(
@@ -112,18 +123,22 @@ def _differences(
         compared += [(a, b) for first, second in pairs for a in finished if a.algo == first
                      for b in finished if b.algo == second and a.algo != reference]
         for ref, base in compared:
-            for metric in ("reward", "cost"):
-                paired, welch = compare_groups(ref, base, metric)
-                rows.append([
-                    task, metric, f"{ref.label} − {base.label}",
-                    _num(paired.difference), _test_cell(paired),
-                    _num(welch.difference), _test_cell(welch),
-                ])
+            for protocol, label in PROTOCOLS.items():
+                ref_read, base_read = under_protocol(ref, protocol), under_protocol(base, protocol)
+                if ref_read is None or base_read is None:
+                    continue
+                for metric in ("reward", "cost"):
+                    paired, welch = compare_groups(ref_read, base_read, metric)
+                    rows.append([
+                        task, metric, f"{ref.label} − {base.label}",
+                        _num(paired.difference), _test_cell(paired),
+                        _num(welch.difference), _test_cell(welch), label,
+                    ])
     if not rows:
         return [f"No task has finished runs of both {reference} and another algo."]
     header = ["task", "metric", "difference", "over seeds", "paired t-test",
-              "over episodes", "Welch t-test"]
-    return _table(header, rows, "lllrlrl")
+              "over episodes", "Welch t-test", "evaluated"]
+    return _table(header, rows, "lllrlrll")
 
 
 def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
@@ -135,23 +150,25 @@ def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
         for group in groups:
             if not group.finished or group.extra:
                 continue
-            s = summarize(group)
             mine = [v for v in values if v.algo == group.algo and v.metric in ("reward", "cost")]
             for table in sorted({v.table for v in mine}):
                 paper = {v.metric: v for v in mine if v.table == table}
                 lengths = [v for v in values if v.table == table and v.metric == "length"]
                 setting = next(iter(paper.values()))
-                rows.append([
-                    task, group.algo, f"{table} ({setting.method}, {setting.setting})",
-                    _ms(s.reward_episodes), _paper(paper.get("reward")),
-                    _ms(s.cost_episodes), _paper(paper.get("cost")),
-                    _ms(s.length_seeds, 1), _paper(lengths[0] if lengths else None, 1),
-                ])
+                for protocol, read in _protocol_groups(group):
+                    s = summarize(read)
+                    rows.append([
+                        task, group.algo, f"{table} ({setting.method}, {setting.setting})",
+                        _ms(s.reward_episodes), _paper(paper.get("reward")),
+                        _ms(s.cost_episodes), _paper(paper.get("cost")),
+                        _ms(s.length_seeds, 1), _paper(lengths[0] if lengths else None, 1),
+                        protocol,
+                    ])
     if not rows:
         return ["The paper reports none of these tasks (or none of these algos)."]
     header = ["task", "algo", "paper's row", "reward (ours)", "reward (paper)", "cost (ours)",
-              "cost (paper)", "length (ours)", "length (paper)"]
-    return _table(header, rows, "lllrrrrrr")
+              "cost (paper)", "length (ours)", "length (paper)", "ours evaluated"]
+    return _table(header, rows, "lllrrrrrrl")
 
 
 def _paper(value, digits: int = 2) -> str:
@@ -341,7 +358,12 @@ def build_report(
     lines += [
         "## Table 1: final deterministic evaluation",
         "",
-        "Mean ± std of the final evaluation (`final_eval.json`). *seeds*: one value per seed "
+        "Mean ± std of the final evaluation (`final_eval.json`). *evaluated*: the policy at "
+        "the end of training (*last policy*), or the checkpoint FSRL's trainer keeps "
+        "(*best-feasible checkpoint*: the epoch with the highest evaluation reward among those "
+        "within the cost limit, or, before any is, the first within it or the highest reward; "
+        "`fsrl/trainer/base_trainer.py`, `perf_is_better`), evaluated with the same episodes "
+        "at the end; the paper does not say which it reports. *seeds*: one value per seed "
         "(its mean over episodes), sample std over seeds. *episodes*: all evaluation episodes "
         "of all seeds pooled (population std), as the paper's Table 1 reports. "
         f"{OVER_LIMIT}: mean cost over seeds above the task's cost limit.",

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import json
 import math
 import shutil
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "PROTOCOLS",
     "Export",
     "ReportError",
     "Run",
@@ -27,6 +29,7 @@ __all__ = [
     "group_runs",
     "flatten",
     "config_differences",
+    "under_protocol",
     "RUN_SPECIFIC_KEYS",
 ]
 
@@ -133,6 +136,29 @@ class RunGroup:
     @property
     def unfinished(self) -> list[Run]:
         return [r for r in self.runs if not r.finished]
+
+
+#: How a run's final evaluation was taken (``final_eval.json``): the policy at the end of
+#: training (the top level), or the best-feasible checkpoint FSRL's trainer keeps
+#: (``best_feasible``, trainer.evaluation.BestFeasible), which may be how the paper's Table 1
+#: was made.
+PROTOCOLS = {
+    "last": "last policy",
+    "best_feasible": "best-feasible checkpoint (FSRL's rule)",
+}
+
+
+def under_protocol(group: RunGroup, protocol: str) -> RunGroup | None:
+    """``group`` with each finished run's final evaluation read under ``protocol``; None when
+    no run of it has that evaluation (runs written before the best-feasible checkpoint)."""
+    if protocol == "last":
+        return group
+    runs = [
+        dataclasses.replace(run, final=run.final[protocol])
+        for run in group.finished
+        if protocol in run.final
+    ]
+    return RunGroup(group.task, group.algo, runs, group.extra) if runs else None
 
 
 def _read_metrics(path: Path) -> list[dict[str, float]]:

@@ -34,6 +34,24 @@ def base_config(task: str, algo: str, seed: int, **changes) -> dict:
     return config
 
 
+def final_evaluation(ep: dict) -> dict:
+    """final_eval.json's entries (trainer.evaluation.EvalResult.to_dict) from per-episode
+    rewards/costs/lengths/safe_steps."""
+    return {
+        "reward_mean": float(np.mean(ep["rewards"])),
+        "reward_std": float(np.std(ep["rewards"])),
+        "cost_mean": float(np.mean(ep["costs"])),
+        "cost_std": float(np.std(ep["costs"])),
+        "length_mean": float(np.mean(ep["lengths"])),
+        "safe_occupancy": 100.0 * sum(ep["safe_steps"]) / sum(ep["lengths"]),
+        "episodes": len(ep["rewards"]),
+        "episode_rewards": ep["rewards"],
+        "episode_costs": ep["costs"],
+        "episode_lengths": ep["lengths"],
+        "episode_safe_steps": ep["safe_steps"],
+    }
+
+
 def write_run(
     path: Path,
     task: str = "SafetyHalfCheetahVelocity-v1",
@@ -42,10 +60,13 @@ def write_run(
     episodes: dict | None = None,
     curve: dict | None = None,
     finished: bool = True,
+    best_feasible: dict | None = None,
     **config_changes,
 ) -> Path:
     """A run directory. ``episodes``: per-episode rewards/costs/lengths/safe_steps of the final
-    evaluation; ``curve``: metrics.csv columns (lists, one entry per epoch)."""
+    evaluation; ``best_feasible``: the same for the best-feasible checkpoint's evaluation
+    (``final_eval.json``'s ``best_feasible`` entry, as trainer.loop writes it); ``curve``:
+    metrics.csv columns (lists, one entry per epoch)."""
     path.mkdir(parents=True, exist_ok=True)
     (path / "config.json").write_text(
         json.dumps(base_config(task, algo, seed, **config_changes))
@@ -64,25 +85,14 @@ def write_run(
         writer.writerow(list(curve))
         writer.writerows(zip(*curve.values()))
     if finished:
-        ep = episodes or {
+        final = final_evaluation(episodes or {
             "rewards": [10.0 + seed, 12.0 + seed, 11.0, 9.0],
             "costs": [0.0, 2.0, 1.0, 3.0],
             "lengths": [50, 50, 50, 50],
             "safe_steps": [50, 48, 49, 47],
-        }
-        final = {
-            "reward_mean": float(np.mean(ep["rewards"])),
-            "reward_std": float(np.std(ep["rewards"])),
-            "cost_mean": float(np.mean(ep["costs"])),
-            "cost_std": float(np.std(ep["costs"])),
-            "length_mean": float(np.mean(ep["lengths"])),
-            "safe_occupancy": 100.0 * sum(ep["safe_steps"]) / sum(ep["lengths"]),
-            "episodes": len(ep["rewards"]),
-            "episode_rewards": ep["rewards"],
-            "episode_costs": ep["costs"],
-            "episode_lengths": ep["lengths"],
-            "episode_safe_steps": ep["safe_steps"],
-        }
+        })
+        if best_feasible is not None:
+            final["best_feasible"] = {**final_evaluation(best_feasible), "epoch": 2}
         (path / "final_eval.json").write_text(json.dumps(final))
     return path
 

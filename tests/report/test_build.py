@@ -322,3 +322,38 @@ def test_frame_ticks_are_short_enough_not_to_overlap():
     assert [label(x, None) for x in (0, 500, 25_000, 125_000, 1_000_000, 2_500_000)] == [
         "0", "500", "25k", "125k", "1M", "2.5M",
     ]
+
+
+def test_best_feasible_protocol_is_a_labelled_row_beside_the_last_policy(tmp_path, make_run):
+    """Runs that kept a best-feasible checkpoint (FSRL's rule) get a second Table 1 row, paper
+    comparison row and difference row, read from final_eval.json's ``best_feasible`` entry;
+    runs written before it (no entry) get the last-policy row only."""
+    best_rewards = {}
+    for algo in ("s3rl", "sac_lag"):
+        for seed in (1, 2, 3):
+            best = {"rewards": [200.0 + 10 * seed + (5 if algo == "s3rl" else 0)] * 2,
+                    "costs": [4.0, 6.0], "lengths": [50, 50], "safe_steps": [45, 45]}
+            best_rewards[algo, seed] = best["rewards"]
+            make_run(tmp_path / "runs" / f"{algo}_seed{seed}", TASK, algo, seed,
+                     best_feasible=best)
+    make_run(tmp_path / "old" / "s3rl_seed1", TASK, "s3rl", 1)
+    text = build_report(tmp_path / "runs", tmp_path / "report").path.read_text()
+
+    last_label, best_label = "last policy", "best-feasible checkpoint (FSRL's rule)"
+    table1 = [line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | 3 |")]
+    assert [row.rstrip(" |").rsplit("| ", 1)[1] for row in table1] == [last_label, best_label]
+    # By hand: s3rl's best-feasible seeds score 215, 225, 235 (std 10), each seed's cost 5.
+    assert "| 225.00 ± 10.00 |" in table1[1] and "| 5.00 ± 0.00 |" in table1[1]
+    # write_run's default episodes (10 + seed, 12 + seed, 11, 9): seed means 10.5 + seed / 2.
+    assert "| 11.50 ± 0.50 |" in table1[0]
+
+    best_diff = next(line for line in text.splitlines()
+                     if "| reward | s3rl − sac_lag |" in line and best_label in line)
+    assert "| 5.00 |" in best_diff  # every seed's pair differs by 5
+    paper_rows = [line for line in text.splitlines() if "| Table 1 (S3RL, Lag) |" in line]
+    assert {row.rstrip(" |").rsplit("| ", 1)[1] for row in paper_rows} == {last_label, best_label}
+
+    old = build_report(tmp_path / "old", tmp_path / "old_report").path.read_text()
+    assert best_label not in "\n".join(
+        line for line in old.splitlines() if line.startswith(f"| {TASK} |")
+    )
