@@ -66,13 +66,18 @@ STEP = [
 # Controller settings of the comparison, as s3rl-train overrides on top of
 # experiment=paper (--experiment) algo=sac_lag (--algo); frames_per_epoch stays the experiment's.
 SETTINGS: dict[str, list[str]] = {
-    "fsrl": ["pid=fsrl"],  # the paper's PID in FSRL's form, one update per 20-episode collect
-    "pid_ema": ["pid=ema"],  # the same gains, OmniSafe's EMA of error and cost, delay 10
+    # Every setting names its controller (algo.lagrangian): pid=... sets only the gains, and
+    # experiment=safe picks `learned`.
+    # The paper's PID in FSRL's form, one update per 20-episode collect.
+    "fsrl": ["algo.lagrangian=pid", "pid=fsrl"],
+    # The same gains, OmniSafe's EMA of error and cost, delay 10.
+    "pid_ema": ["algo.lagrangian=pid", "pid=ema"],
     # Twice as many updates (10 episodes each, 2000 gradient steps between them): the schedule
     # of the first cycling runs. With 10 envs in lockstep on 1000-step episodes a smaller batch
     # does not update more often: episodes only end every 10000 frames. Warm-up and evaluation
     # cadence stay those of the 20000-frame collects (the 1000-step tasks), for comparability.
     "fsrl_10k": [
+        "algo.lagrangian=pid",
         "pid=fsrl",
         "collector.frames_per_batch=10000",
         "collector.init_random_frames=20000",
@@ -82,7 +87,7 @@ SETTINGS: dict[str, list[str]] = {
     # pid_ema with a 20x integral gain: with ki = 0.0005 the integral adds ~0.025 to lambda per
     # update at an error of 50, so over 15-50 updates pid_ema is a P controller whose cost
     # settles at lambda / kp above the limit; a larger ki is what can close that offset.
-    "pid_ema_ki0.01": ["pid=ema", "algo.pid.ki=0.01"],
+    "pid_ema_ki0.01": ["algo.lagrangian=pid", "pid=ema", "algo.pid.ki=0.01"],
     # OmniSafe's cadence (algo.lagrangian_cadence=step): lambda moves after every gradient step,
     # from the mean cost of the last 20 finished training episodes (one FSRL collect's worth),
     # frozen while the collector still acts at random (the first collect). Rates and gains are
@@ -91,11 +96,11 @@ SETTINGS: dict[str, list[str]] = {
     "step_learned_lr3e-4": ["algo.lagrangian=learned", "algo.lagrangian_lr=0.0003", *STEP],
     # OmniSafe's SACPID (configs/pid/omnisafe.yaml) with its integral gain per env step (1e-7)
     # scaled to the paper's 0.2 gradient steps per env step: the same lambda per frame.
-    "step_pid_omnisafe": ["pid=omnisafe", "algo.pid.ki=5e-7", *STEP],
+    "step_pid_omnisafe": ["algo.lagrangian=pid", "pid=omnisafe", "algo.pid.ki=5e-7", *STEP],
     # The controllers alone, for --experiment safe (configs/experiment/safe.yaml: the step
     # cadence above and 1000-frame collects); the second round of the selection.
     "learned_lr3e-4": ["algo.lagrangian=learned", "algo.lagrangian_lr=0.0003"],
-    "pid_omnisafe": ["pid=omnisafe", "algo.pid.ki=5e-7"],
+    "pid_omnisafe": ["algo.lagrangian=pid", "pid=omnisafe", "algo.pid.ki=5e-7"],
 }
 BASE_OVERRIDES = ["threads=1", "logger.progress_bar=false"]
 LAGRANGIAN_ALGOS = ("sac_lag", "s3rl")  # the off-policy SAC pair whose schedule this studies

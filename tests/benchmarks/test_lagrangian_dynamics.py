@@ -228,3 +228,22 @@ def test_plot_has_a_pair_of_rows_per_setting_and_a_column_per_seed(tmp_path):
         "HalfCheetahVelocity-v1 sac_lag seed 20",
         "HalfCheetahVelocity-v1 s3rl seed 10",
     ]
+
+
+@pytest.mark.parametrize("experiment", ["paper", "safe"])
+def test_every_setting_composes_to_the_controller_it_names(experiment):
+    """pid=... sets only the PID's gains and experiment=safe picks the learned multiplier, so a
+    PID setting that does not name its controller would run `learned` under --experiment safe
+    (two settings, one controller)."""
+    from hydra import compose, initialize_config_dir
+
+    from s3rl_torchrl.trainer import register_configs, validate
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(ld.REPO / "configs"), version_base="1.3"):
+        for name, overrides in ld.SETTINGS.items():
+            cfg = validate(compose(config_name="train", overrides=[
+                f"experiment={experiment}", "algo=sac_lag", *ld.BASE_OVERRIDES, *overrides,
+            ]))
+            expected = "learned" if "learned" in name else "pid"
+            assert cfg.algo.lagrangian == expected, name
