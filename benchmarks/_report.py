@@ -1,5 +1,5 @@
-"""What every benchmark script shares: interleaved timing rounds, and its results as JSON with
-the command that made them."""
+"""What every benchmark script shares: the config of a measured recipe run, interleaved timing
+rounds, and its results as JSON with the command that made them."""
 
 from __future__ import annotations
 
@@ -11,6 +11,28 @@ from collections.abc import Callable
 from pathlib import Path
 
 import torch
+
+# What a measured recipe run leaves out: logging, checkpoints, long evaluations.
+MEASURED_RUN = [
+    "eval.episodes=1",
+    "eval.random_baseline=false",
+    "logger=none",
+    "logger.progress_bar=false",
+    "save_interval=1000",
+]
+
+
+def recipe_config(*overrides: str):
+    """The validated ``s3rl-train`` config of ``overrides`` on top of :data:`MEASURED_RUN`
+    (as the recipe composes it: ``configs/`` and its schema)."""
+    from hydra import compose, initialize_config_dir
+
+    from s3rl_torchrl.recipes import config_dir
+    from s3rl_torchrl.trainer import register_configs, validate
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return validate(compose(config_name="train", overrides=[*MEASURED_RUN, *overrides]))
 
 
 def command_line() -> str:

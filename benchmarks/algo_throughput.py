@@ -22,14 +22,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import write_report
-from hydra import compose, initialize_config_dir
+from _report import recipe_config, write_report
 
-from s3rl_torchrl.recipes import config_dir
-from s3rl_torchrl.trainer import Trainer, register_configs, validate
+from s3rl_torchrl.trainer import Trainer
 from s3rl_torchrl.trainer.config import ALGO_FAMILIES, ALGO_NAMES
-
-CONFIG_DIR = str(config_dir())
 
 
 def _mark(trainer: Trainer) -> tuple[int, int, float, float]:
@@ -56,28 +52,19 @@ class MarkedTrainer(Trainer):
 
 
 def measure(algo: str, task: str, frames: int) -> dict:
-    register_configs()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        probe = validate(compose(config_name="train", overrides=[f"algo={algo}"]))
+    probe = recipe_config(f"algo={algo}")
     schedule = probe.algo.schedule(probe.collector)
     batch = probe.collector.frames_per_batch
     # Frames up to the end of the first collect that learns, then the measured window.
     first = next(k for k in range(batch, 10**9, batch) if k >= schedule.warmup_frames())
     total = first + -(-frames // batch) * batch
-    overrides = [
+    cfg = recipe_config(
         f"algo={algo}",
         f"task={task}",
         f"collector.total_frames={total}",
         f"collector.frames_per_epoch={total}",
-        "eval.episodes=1",
         "eval.final_episodes=1",
-        "eval.random_baseline=false",
-        "logger=none",
-        "logger.progress_bar=false",
-        "save_interval=1000",
-    ]
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = validate(compose(config_name="train", overrides=overrides))
+    )
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = MarkedTrainer(cfg, run_dir)

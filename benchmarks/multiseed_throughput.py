@@ -50,19 +50,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import interleaved_rounds, write_report
-from hydra import compose, initialize_config_dir
+from _report import interleaved_rounds, recipe_config, write_report
 
-from s3rl_torchrl.trainer import MultiSeedTrainer, Trainer, register_configs, validate
+from s3rl_torchrl.trainer import MultiSeedTrainer, Trainer
 
-CONFIG_DIR = str(Path(__file__).resolve().parents[1] / "configs")
 WARMUP = 10_000
 
 
 def paper_config(
     task: str, frames: int, compiled: bool, threads: int, seeds: list[int] | None, batch: int
 ):
-    register_configs()
     overrides = [
         "experiment=paper",
         f"collector.frames_per_batch={batch}",
@@ -72,19 +69,13 @@ def paper_config(
         # experiment=paper's warm-up is one random collect; the clock starts at WARMUP frames
         # either way, but the docstring's 10 000 random frames are what is measured after.
         f"collector.init_random_frames={WARMUP}",
-        "eval.episodes=1",
         "eval.max_steps=100",  # evaluation is not what is measured: keep it short
-        "eval.random_baseline=false",
-        "logger=none",
-        "logger.progress_bar=false",
         f"compile={str(compiled).lower()}",
         f"threads={threads}",
-        "save_interval=1000",
     ]
     if seeds is not None:
         overrides.append(f"seeds=[{','.join(map(str, seeds))}]")
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = validate(compose(config_name="train", overrides=overrides))
+    cfg = recipe_config(*overrides)
     cfg.eval.final_episodes = 1
     return cfg
 

@@ -19,35 +19,22 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import write_report
-from hydra import compose, initialize_config_dir
+from _report import recipe_config, write_report
 
-from s3rl_torchrl.recipes import config_dir
-from s3rl_torchrl.trainer import Trainer, register_configs, validate
-
-CONFIG_DIR = str(config_dir())
+from s3rl_torchrl.trainer import Trainer
 
 
 def measure(task: str, frames: int, compiled: bool, threads: int) -> dict:
-    register_configs()
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        paper = validate(compose(config_name="train", overrides=["experiment=paper", f"task={task}"]))
+    paper = recipe_config("experiment=paper", f"task={task}")
     epoch = paper.collector.frames_per_epoch  # the first epoch is the warm-up
     frames = -(-frames // epoch) * epoch
-    overrides = [
+    cfg = recipe_config(
         "experiment=paper",
         f"task={task}",
         f"collector.total_frames={epoch + frames}",
-        "eval.episodes=1",
-        "eval.random_baseline=false",
-        "logger=none",
-        "logger.progress_bar=false",
         f"compile={str(compiled).lower()}",
         f"threads={threads}",
-        "save_interval=1000",
-    ]
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = validate(compose(config_name="train", overrides=overrides))
+    )
     marks: list[tuple[int, float, float]] = []  # (frames, time, eval seconds)
 
     def on_epoch_end(trainer, row):
