@@ -128,6 +128,8 @@ METRICS = (
     "train_reward",
     "train_cost",
     "train_cost_autocorr",
+    "eval_reward_last20",
+    "eval_cost_last20",
     "final_reward",
     "final_cost",
 )
@@ -219,6 +221,8 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
     frames = [_float(r["frames"]) for r in rows]
     half = frames[-1] / 2
     late = [r for r, f in zip(rows, frames) if f > half]
+    # The issue's target window: the last 20% of epochs (at least one).
+    last20 = rows[-max(1, round(0.2 * len(rows))):]
     col = {key: [_float(r.get(key)) for r in late] for key in rows[0]}
 
     def over(values: list[float]) -> float:
@@ -247,6 +251,8 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "train_cost": _mean(col["train/cost"]),
         # The controller's input from one collect to the next: about -1 in the period-2 cycle.
         "train_cost_autocorr": lag1_autocorrelation(col["train/cost"]),
+        "eval_reward_last20": _mean([_float(r.get("eval/reward")) for r in last20]),
+        "eval_cost_last20": _mean([_float(r.get("eval/cost")) for r in last20]),
         "final_reward": math.nan,
         "final_cost": math.nan,
     }
@@ -276,11 +282,20 @@ def aggregate(runs: list[dict]) -> list[dict]:
     return table
 
 
+def _pm(row: dict, key: str, digits: int) -> str:
+    """``mean ± std`` over seeds (the std left out for one seed), ``–`` without a value."""
+    mean, std = row[key], row[key + "_std"]
+    if math.isnan(mean):
+        return "–"
+    return f"{mean:.{digits}f}" + ("" if math.isnan(std) else f" ± {std:.{digits}f}")
+
+
 def markdown(table: list[dict]) -> str:
     head = (
         "| task | algo | setting | seeds | frames | eval cost > d | train cost > d | mean abs "
-        "dlambda (epoch) | lambda | eval reward | eval cost | train cost lag-1 autocorr |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "dlambda (epoch) | lambda | eval reward | eval cost | train cost lag-1 autocorr | "
+        "eval reward (last 20%) | eval cost (last 20%) | final reward | final cost |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     )
     lines = [head]
     for r in table:
@@ -288,7 +303,9 @@ def markdown(table: list[dict]) -> str:
             f"| {r['task']} | {r['algo']} | {r['setting']} | {len(r['seeds'])} | {r['frames']} | "
             f"{r['eval_cost_over_limit']:.2f} | {r['train_cost_over_limit']:.2f} | "
             f"{r['mean_abs_dlambda_epoch']:.3g} | {r['lambda_mean']:.3g} | "
-            f"{r['eval_reward']:.0f} | {r['eval_cost']:.1f} | {r['train_cost_autocorr']:.2f} |"
+            f"{r['eval_reward']:.0f} | {r['eval_cost']:.1f} | {r['train_cost_autocorr']:.2f} | "
+            f"{r['eval_reward_last20']:.0f} | {r['eval_cost_last20']:.1f} | "
+            f"{_pm(r, 'final_reward', 0)} | {_pm(r, 'final_cost', 1)} |"
         )
     return "\n".join(lines)
 

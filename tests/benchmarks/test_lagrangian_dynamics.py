@@ -81,6 +81,8 @@ def test_second_half_statistics_by_hand(tmp_path):
     # Deviations from the mean 35/3: 25/3, 10/3, -35/3; pairs (25/3)(10/3) + (10/3)(-35/3).
     assert s["train_cost_autocorr"] == pytest.approx((250 - 350) / (625 + 100 + 1225))
     assert (s["final_reward"], s["final_cost"]) == (2500.0, 3.0)
+    # The last 20% of 6 epochs: round(1.2) = 1 epoch, the last.
+    assert (s["eval_reward_last20"], s["eval_cost_last20"]) == (1000.0, 5.0)
 
     # A second seed of the same setting: every late eval cost over the limit, no final eval.
     rows_b = [[r[0], r[1], r[2], r[3], r[4] * 2, r[5], 50.0] for r in rows]
@@ -92,6 +94,9 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert row["eval_cost_over_limit_std"] == pytest.approx(math.sqrt(2 * (1 / 3) ** 2))
     assert row["mean_abs_dlambda_epoch"] == pytest.approx((50.5 + 101) / 2)
     assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
+    assert row["eval_cost_last20"] == pytest.approx((5.0 + 50.0) / 2)
+    line = ld.markdown(report["settings"]).splitlines()[-1]
+    assert line.endswith("| 1000 | 27.5 | 2500 | 3.0 |")  # one final evaluation: no std
     saved = json.loads((tmp_path / "s.json").read_text())
     assert saved["settings"][0]["seeds"] == [10, 20] and len(saved["runs"]) == 2
 
