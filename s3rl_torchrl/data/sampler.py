@@ -15,6 +15,8 @@ up to date as the buffer writes, so drawing a batch never scans the storage:
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +27,12 @@ from torchrl.data.replay_buffers.samplers import Sampler
 from torchrl.data.replay_buffers.storages import Storage, TensorStorage
 from torchrl.data.replay_buffers.writers import ImmutableDatasetWriter
 
-__all__ = ["SafeUnsafeSampler", "StratumTooSmallError", "CONTRASTIVE_ROLE_KEY"]
+__all__ = [
+    "SafeUnsafeSampler",
+    "StratumTooSmallError",
+    "LabelBinTooSmallError",
+    "CONTRASTIVE_ROLE_KEY",
+]
 
 CONTRASTIVE_ROLE_KEY = "contrastive_role"
 ANCHOR, POSITIVE, NEGATIVE = 0, 1, 2
@@ -55,42 +62,70 @@ class StratumTooSmallError(RuntimeError):
         )
 
 
-class _SafetyPartition:
-    """Safe/unsafe partition of the slots of a 1-D storage, updated per write in O(written)."""
+class LabelBinTooSmallError(StratumTooSmallError):
+    """The graded form: no label bin holds ``2B`` transitions while the others hold ``B``.
 
-    def __init__(self, capacity: int):
+    Attributes:
+        stratum_sizes: transitions per label bin when the batch was requested.
+        num_triplets: ``B``.
+    """
+
+    def __init__(self, stratum_sizes: list[int], num_triplets: int):
+        self.stratum_sizes = list(stratum_sizes)
+        self.num_triplets = int(num_triplets)
+        RuntimeError.__init__(
+            self,
+            f"not enough transitions for this batch: a graded contrastive batch needs one label "
+            f"bin with {2 * num_triplets} transitions and {num_triplets} in the other bins; the "
+            f"bins hold {self.stratum_sizes}. Check `replay_buffer.can_sample()` first and skip "
+            "the update when it is False.",
+        )
+
+
+class _SafetyPartition:
+    """Partition of the slots of a 1-D storage into strata, updated per write in O(written).
+
+    Two strata (UNSAFE = 0, SAFE = 1) for the binary label; ``num_strata`` label bins for a
+    graded one (stratum ``k`` = bin ``k``, see ``SafeUnsafeSampler(bin_edges=...)``).
+    """
+
+    def __init__(self, capacity: int, num_strata: int = 2):
         self.capacity = int(capacity)
-        # Stratum of each slot: SAFE, UNSAFE or _EMPTY_SLOT (never written since the last empty).
+        self.num_strata = int(num_strata)
+        if not 2 <= self.num_strata <= 127:  # int8 slot labels, -1 for an empty slot
+            raise ValueError(f"a partition needs 2 to 127 strata, got {self.num_strata}.")
+        # Stratum of each slot, or _EMPTY_SLOT (never written since the last empty).
         self.label = torch.full((self.capacity,), _EMPTY_SLOT, dtype=torch.int8)
         # Position of a slot inside its stratum's member array (meaningless for empty slots).
         self.position = torch.zeros(self.capacity, dtype=torch.long)
         self.members = {
-            UNSAFE: torch.zeros(self.capacity, dtype=torch.long),
-            SAFE: torch.zeros(self.capacity, dtype=torch.long),
+            stratum: torch.zeros(self.capacity, dtype=torch.long)
+            for stratum in range(self.num_strata)
         }
-        self.size = {UNSAFE: 0, SAFE: 0}
+        self.size = dict.fromkeys(range(self.num_strata), 0)
 
     def __len__(self) -> int:
-        return self.size[SAFE] + self.size[UNSAFE]
+        return sum(self.size.values())
 
     def empty(self) -> None:
         self.label.fill_(_EMPTY_SLOT)
-        self.size = {UNSAFE: 0, SAFE: 0}
+        self.size = dict.fromkeys(range(self.num_strata), 0)
 
-    def update(self, index: torch.Tensor, safe: torch.Tensor) -> None:
-        """Set the stratum of the slots ``index`` (unique, 1-D) from the boolean ``safe``."""
-        new = safe.to(torch.int8)
+    def update(self, index: torch.Tensor, stratum: torch.Tensor) -> None:
+        """Set the stratum of the slots ``index`` (unique, 1-D): the boolean ``safe`` label
+        (``True`` -> SAFE) or the integer bin of a graded label."""
+        new = stratum.to(torch.int8)
         old = self.label[index]
         changed = old != new
         if not bool(changed.any()):
             return
         index, old, new = index[changed], old[changed], new[changed]
-        for stratum in (UNSAFE, SAFE):
+        for stratum in range(self.num_strata):
             leaving = index[old == stratum]
             if leaving.numel():
                 self._remove(stratum, leaving)
         self.label[index] = new
-        for stratum in (UNSAFE, SAFE):
+        for stratum in range(self.num_strata):
             joining = index[new == stratum]
             if joining.numel():
                 self._append(stratum, joining)
@@ -128,21 +163,30 @@ class _SafetyPartition:
         return self.members[stratum][positions]
 
     def state_dict(self) -> dict[str, Any]:
-        return {
+        state = {
             "capacity": self.capacity,
             "label": self.label.clone(),
             "position": self.position.clone(),
-            "safe_members": self.members[SAFE][: self.size[SAFE]].clone(),
-            "unsafe_members": self.members[UNSAFE][: self.size[UNSAFE]].clone(),
         }
+        if self.num_strata == 2:  # the binary partition's format (checkpoints before bins)
+            state["safe_members"] = self.members[SAFE][: self.size[SAFE]].clone()
+            state["unsafe_members"] = self.members[UNSAFE][: self.size[UNSAFE]].clone()
+        else:
+            state["strata_members"] = [
+                self.members[k][: self.size[k]].clone() for k in range(self.num_strata)
+            ]
+        return state
 
     @classmethod
     def from_state_dict(cls, state: dict[str, Any]) -> _SafetyPartition:
-        partition = cls(state["capacity"])
+        if "strata_members" in state:
+            strata = dict(enumerate(state["strata_members"]))
+        else:
+            strata = {SAFE: state["safe_members"], UNSAFE: state["unsafe_members"]}
+        partition = cls(state["capacity"], num_strata=len(strata))
         partition.label.copy_(state["label"])
         partition.position.copy_(state["position"])
-        for stratum, name in ((SAFE, "safe_members"), (UNSAFE, "unsafe_members")):
-            members = state[name]
+        for stratum, members in strata.items():
             partition.members[stratum][: members.numel()] = members
             partition.size[stratum] = members.numel()
         return partition
@@ -200,13 +244,26 @@ class SafeUnsafeSampler(Sampler):
     Draws use the generator the replay buffer hands to its sampler (``generator=`` of the
     buffer), or torch's global RNG when it has none, so a seeded run is reproducible.
 
+    **Graded labels** (``bin_edges=[e_1, ..., e_{K-1}]``, increasing): ``label_key`` holds a
+    float label (e.g. ``("next", "cost_to_go")`` of :class:`~s3rl_torchrl.transforms.CostToGo`)
+    and the partition has ``K`` strata, the label bins ``[-inf, e_1), [e_1, e_2), ...,
+    [e_{K-1}, inf)``, kept up to date the same way. The contrastive mode then draws by label
+    distance: one anchor bin per batch, uniformly among the bins that hold ``2B`` transitions
+    while the other bins hold ``B``; ``B`` anchors and ``B`` positives from that bin (distinct),
+    and ``B`` distinct negatives from the other bins, split as evenly as their sizes allow (so
+    rare far bins are represented, as Algorithm 2 represents the rare unsafe states). The
+    uniform mode is unchanged; ``unsafe_fraction`` has no graded form.
+
     Args:
-        label_key: the boolean label entry read from the stored data. Defaults to
+        label_key: the label entry read from the stored data. Defaults to
             ``("next", "safe")`` (written by :class:`~s3rl_torchrl.transforms.CostLabel`).
 
     Keyword Args:
         unsafe_fraction (float, optional): fraction of unsafe transitions per batch, in [0, 1].
         contrastive (bool): contrastive triplet batches. Exclusive with ``unsafe_fraction``.
+        bin_edges (sequence of float, optional): the inner edges of the graded label's bins
+            (at least one, strictly increasing, at most 126); ``None`` (default): the binary
+            label.
 
     .. note:: Only writes made through a replay buffer's writer (``extend`` / ``add``) are seen.
        After ``rb[idx] = data`` call ``rb.mark_update(idx)``. If the storage was filled some
@@ -229,7 +286,23 @@ class SafeUnsafeSampler(Sampler):
         *,
         unsafe_fraction: float | None = None,
         contrastive: bool = False,
+        bin_edges: Sequence[float] | None = None,
     ):
+        if bin_edges is not None:
+            bin_edges = tuple(float(e) for e in bin_edges)
+            ordered = all(a < b for a, b in zip(bin_edges, bin_edges[1:]))
+            if not bin_edges or len(bin_edges) > 126 or not ordered or not all(
+                math.isfinite(e) for e in bin_edges
+            ):
+                raise ValueError(
+                    "SafeUnsafeSampler: bin_edges must be 1 to 126 finite, strictly increasing "
+                    f"numbers, got {list(bin_edges)}."
+                )
+            if unsafe_fraction is not None:
+                raise ValueError(
+                    "SafeUnsafeSampler: unsafe_fraction has no graded form; with bin_edges use "
+                    "the uniform or the contrastive mode."
+                )
         if unsafe_fraction is not None:
             if contrastive:
                 raise ValueError(
@@ -244,6 +317,7 @@ class SafeUnsafeSampler(Sampler):
                     f"got {unsafe_fraction}."
                 )
         self.label_key = label_key
+        self.bin_edges = bin_edges
         self.unsafe_fraction = unsafe_fraction
         self.contrastive = bool(contrastive)
         self._partition: _SafetyPartition | None = None
@@ -256,8 +330,33 @@ class SafeUnsafeSampler(Sampler):
         return self._owner.partition if self._owner is not None else self._partition
 
     @property
+    def graded(self) -> bool:
+        """Whether the strata are bins of a graded label (``bin_edges``)."""
+        return self.bin_edges is not None
+
+    @property
+    def num_strata(self) -> int:
+        return 2 if self.bin_edges is None else len(self.bin_edges) + 1
+
+    @property
+    def stratum_sizes(self) -> list[int]:
+        """Transitions per stratum: ``[unsafe, safe]``, or per label bin (graded)."""
+        partition = self.partition
+        if partition is None:
+            return [0] * self.num_strata
+        return [partition.size[k] for k in range(self.num_strata)]
+
+    def stratum_of(self, label: torch.Tensor) -> torch.Tensor:
+        """The stratum of each label: ``safe`` as 0/1, or the bin index of a graded label."""
+        if self.bin_edges is None:
+            return label.to(torch.int8)
+        edges = torch.tensor(self.bin_edges, dtype=label.dtype, device=label.device)
+        # right=True: bin k is [e_k, e_{k+1}), an edge value opens the bin above it.
+        return torch.bucketize(label, edges, right=True).to(torch.int8)
+
+    @property
     def num_safe(self) -> int:
-        """Number of stored transitions labelled safe."""
+        """Number of stored transitions labelled safe (binary label; stratum 1 when graded)."""
         partition = self.partition
         return 0 if partition is None else partition.size[SAFE]
 
@@ -281,7 +380,7 @@ class SafeUnsafeSampler(Sampler):
         # A write larger than the ring wraps onto the same slot twice; the storage keeps one.
         index = torch.unique(index)
         self._ensure_partition(storage)
-        self._partition.update(index, self._read_labels(storage, index))
+        self._partition.update(index, self.stratum_of(self._read_labels(storage, index)))
 
     def extend(self, index: torch.Tensor) -> None:
         # The partition is updated in mark_update, which also fires for writes made through
@@ -301,10 +400,10 @@ class SafeUnsafeSampler(Sampler):
             self._owner.rebuild(storage)
             return
         self._check_storage(storage)
-        self._partition = _SafetyPartition(storage.max_size)
+        self._partition = _SafetyPartition(storage.max_size, self.num_strata)
         if len(storage):
             index = torch.arange(len(storage))
-            self._partition.update(index, self._read_labels(storage, index))
+            self._partition.update(index, self.stratum_of(self._read_labels(storage, index)))
 
     def _check_storage(self, storage: Storage) -> None:
         if not isinstance(storage, TensorStorage):
@@ -321,7 +420,7 @@ class SafeUnsafeSampler(Sampler):
     def _ensure_partition(self, storage: Storage) -> None:
         if self._partition is None:
             self._check_storage(storage)
-            self._partition = _SafetyPartition(storage.max_size)
+            self._partition = _SafetyPartition(storage.max_size, self.num_strata)
         elif self._partition.capacity != storage.max_size:
             raise RuntimeError(
                 f"SafeUnsafeSampler: the partition was built for a storage of "
@@ -343,7 +442,13 @@ class SafeUnsafeSampler(Sampler):
                 "s3rl_torchrl.transforms.CostLabel (it writes ('next', 'safe')) or pass "
                 "label_key= to the sampler."
             )
-        if label.dtype != torch.bool:
+        if self.graded:
+            if not label.is_floating_point():
+                raise TypeError(
+                    f"SafeUnsafeSampler(bin_edges=...): the graded label {self.label_key!r} "
+                    f"must be a float tensor, got dtype {label.dtype}."
+                )
+        elif label.dtype != torch.bool:
             raise TypeError(
                 f"SafeUnsafeSampler: the label {self.label_key!r} must be a bool tensor "
                 f"(True = safe), got dtype {label.dtype}. CostLabel writes ('next', 'safe') "
@@ -357,7 +462,14 @@ class SafeUnsafeSampler(Sampler):
                 f"{tuple(stored.get(self.label_key).shape)}). Flatten batched collector output "
                 "before extending: `rb.extend(data.reshape(-1))`."
             )
-        return label[:, 0].cpu()
+        label = label[:, 0].cpu()
+        if self.graded and bool(torch.isnan(label).any()):
+            raise ValueError(
+                f"SafeUnsafeSampler: NaN graded labels {self.label_key!r} at storage slots "
+                f"{index[torch.isnan(label)][:5].tolist()}: a row without a label (e.g. a reset "
+                "row's margin) was stored."
+            )
+        return label
 
     # ------------------------------------------------------------------ sampling
     def _generator(self):
@@ -376,7 +488,20 @@ class SafeUnsafeSampler(Sampler):
         num_unsafe = round(self.unsafe_fraction * batch_size)
         return batch_size - num_unsafe, num_unsafe
 
+    def _anchor_strata(self, num_triplets: int) -> list[int]:
+        """Graded contrastive: the bins that can give ``2B`` anchors and positives while the
+        other bins hold ``B`` negatives."""
+        sizes = self.stratum_sizes
+        total = sum(sizes)
+        return [
+            k
+            for k, size in enumerate(sizes)
+            if size >= 2 * num_triplets and total - size >= num_triplets
+        ]
+
     def _is_sampleable(self, required_safe: int, required_unsafe: int) -> bool:
+        if self.contrastive and self.graded:
+            return bool(self._anchor_strata(required_unsafe))
         if self.contrastive:
             return self.num_safe >= required_safe and self.num_unsafe >= required_unsafe
         return (required_safe == 0 or self.num_safe > 0) and (
@@ -407,9 +532,13 @@ class SafeUnsafeSampler(Sampler):
             )
         required_safe, required_unsafe = self._requirements(batch_size)
         if not self._is_sampleable(required_safe, required_unsafe):
+            if self.graded:
+                raise LabelBinTooSmallError(self.stratum_sizes, required_unsafe)
             raise StratumTooSmallError(
                 self.num_safe, self.num_unsafe, required_safe, required_unsafe
             )
+        if self.contrastive and self.graded:
+            return self._sample_graded(partition, batch_size // 3, generator)
         if self.contrastive:
             num_triplets = batch_size // 3
             safe = partition.draw(SAFE, 2 * num_triplets, generator, distinct=True)
@@ -423,6 +552,24 @@ class SafeUnsafeSampler(Sampler):
             ]
         )
         return index[torch.randperm(batch_size, generator=generator)], {}
+
+    def _sample_graded(
+        self, partition: _SafetyPartition, num_triplets: int, generator
+    ) -> tuple[torch.Tensor, dict]:
+        eligible = self._anchor_strata(num_triplets)
+        anchor_stratum = eligible[int(torch.randint(len(eligible), (1,), generator=generator))]
+        same = partition.draw(anchor_stratum, 2 * num_triplets, generator, distinct=True)
+        others = [k for k in range(partition.num_strata) if k != anchor_stratum]
+        counts = _even_split(
+            num_triplets, [partition.size[k] for k in others], generator
+        )
+        negatives = [
+            partition.draw(k, count, generator, distinct=True)
+            for k, count in zip(others, counts)
+            if count
+        ]
+        role = torch.arange(3, dtype=torch.long).repeat_interleave(num_triplets)
+        return torch.cat([same, *negatives]), {CONTRASTIVE_ROLE_KEY: role}
 
     # ------------------------------------------------------------------ views
     @staticmethod
@@ -464,7 +611,10 @@ class SafeUnsafeSampler(Sampler):
             )
         owner = sampler._owner if sampler._owner is not None else sampler
         view_sampler = SafeUnsafeSampler(
-            owner.label_key, contrastive=contrastive, unsafe_fraction=unsafe_fraction
+            owner.label_key,
+            contrastive=contrastive,
+            unsafe_fraction=unsafe_fraction,
+            bin_edges=owner.bin_edges,
         )
         view_sampler._owner = owner
         batch_size = int(batch_size)
@@ -489,19 +639,29 @@ class SafeUnsafeSampler(Sampler):
     def state_dict(self) -> dict[str, Any]:
         if self._owner is not None:
             return {}
-        return {
+        state = {
             "label_key": self.label_key,
             "partition": None if self._partition is None else self._partition.state_dict(),
         }
+        if self.graded:
+            state["bin_edges"] = list(self.bin_edges)
+        return state
 
     def load_state_dict(self, state_dict: dict[str, Any]) -> None:
         if self._owner is not None or not state_dict:
             return
-        self._check_label_key(state_dict["label_key"])
+        self._check_label_key(state_dict["label_key"], state_dict.get("bin_edges"))
         partition = state_dict["partition"]
         self._partition = None if partition is None else _SafetyPartition.from_state_dict(partition)
 
-    def _check_label_key(self, saved_key) -> None:
+    def _check_label_key(self, saved_key, saved_edges=None) -> None:
+        mine_edges = None if self.bin_edges is None else list(self.bin_edges)
+        saved_edges = None if saved_edges is None else [float(e) for e in saved_edges]
+        if saved_edges != mine_edges:
+            raise ValueError(
+                f"SafeUnsafeSampler: the saved partition was built with bin_edges "
+                f"{saved_edges}, this sampler has {mine_edges}."
+            )
         as_tuple = tuple(saved_key) if isinstance(saved_key, (list, tuple)) else (saved_key,)
         mine = self.label_key
         mine = tuple(mine) if isinstance(mine, (list, tuple)) else (mine,)
@@ -517,8 +677,11 @@ class SafeUnsafeSampler(Sampler):
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
         label_key = list(self.label_key) if isinstance(self.label_key, tuple) else self.label_key
+        metadata = {"label_key": label_key}
+        if self.graded:
+            metadata["bin_edges"] = list(self.bin_edges)
         with open(path / "metadata.json", "w") as file:
-            json.dump({"label_key": label_key}, file)
+            json.dump(metadata, file)
         if self._partition is not None:
             torch.save(self._partition.state_dict(), path / "partition.pt")
 
@@ -527,7 +690,8 @@ class SafeUnsafeSampler(Sampler):
             return
         path = Path(path)
         with open(path / "metadata.json") as file:
-            self._check_label_key(json.load(file)["label_key"])
+            metadata = json.load(file)
+        self._check_label_key(metadata["label_key"], metadata.get("bin_edges"))
         partition_file = path / "partition.pt"
         self._partition = (
             _SafetyPartition.from_state_dict(torch.load(partition_file, weights_only=True))
@@ -543,10 +707,32 @@ class SafeUnsafeSampler(Sampler):
         else:
             mode = f"unsafe_fraction={self.unsafe_fraction}"
         view = ", view" if self._owner is not None else ""
-        return (
-            f"{type(self).__name__}(label_key={self.label_key!r}, {mode}{view}, "
-            f"num_safe={self.num_safe}, num_unsafe={self.num_unsafe})"
-        )
+        if self.graded:
+            counts = f"bin_edges={list(self.bin_edges)}, stratum_sizes={self.stratum_sizes}"
+        else:
+            counts = f"num_safe={self.num_safe}, num_unsafe={self.num_unsafe}"
+        return f"{type(self).__name__}(label_key={self.label_key!r}, {mode}{view}, {counts})"
+
+
+def _even_split(total: int, capacities: list[int], generator) -> list[int]:
+    """``total`` draws split over strata as evenly as their ``capacities`` allow.
+
+    Water-filling: each round gives every stratum with room an equal share of what is left
+    (the remainder one each, to strata in random order), capped by its room; strata that fill
+    drop out. Requires ``sum(capacities) >= total``.
+    """
+    counts = [0] * len(capacities)
+    left = total
+    while left > 0:
+        open_strata = [k for k, cap in enumerate(capacities) if cap > counts[k]]
+        share, extra = divmod(left, len(open_strata))
+        order = torch.randperm(len(open_strata), generator=generator).tolist()
+        for rank, position in enumerate(order):
+            k = open_strata[position]
+            give = min(capacities[k] - counts[k], share + (rank < extra))
+            counts[k] += give
+            left -= give
+    return counts
 
 
 class _ViewWriter(ImmutableDatasetWriter):

@@ -5,6 +5,20 @@ It sits below :mod:`s3rl_torchrl.trainer` and :mod:`s3rl_torchrl.report` and imp
 (docs/architecture.md).
 """
 
-from s3rl_torchrl.diagnostics.probe import ProbeResult, linear_probe, replay_probe
+from s3rl_torchrl.diagnostics.probe import (
+    GradedProbeResult,
+    ProbeResult,
+    graded_probe,
+    linear_probe,
+    replay_graded_probe,
+    replay_probe,
+)
 
-__all__ = ["ProbeResult", "linear_probe", "replay_probe"]
+__all__ = [
+    "GradedProbeResult",
+    "ProbeResult",
+    "graded_probe",
+    "linear_probe",
+    "replay_graded_probe",
+    "replay_probe",
+]

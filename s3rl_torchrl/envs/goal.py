@@ -288,6 +288,18 @@ def hazard_cost(agent_xy: np.ndarray, hazards_xy: np.ndarray) -> float:
     return float(np.sum(HAZARD_COST * (HAZARD_SIZE - dist[inside])) > 0.0)
 
 
+def hazard_margin(agent_xy: np.ndarray, hazards_xy: np.ndarray) -> float:
+    """The graded form of :func:`hazard_cost`: planar distance from the robot body to the
+    nearest hazard's edge, ``min_i d_i - 0.2`` (metres).
+
+    Negative inside a hazard, so the cost is 1 exactly when the margin is negative. A
+    training-only label (``info["cost_margin"]``), never an observation (the robot sees the
+    hazards only through its lidar).
+    """
+    dist = np.sqrt(np.sum(np.square(hazards_xy - agent_xy), axis=1))
+    return float(dist.min() - HAZARD_SIZE)
+
+
 def goal_lidars(agent_pos: np.ndarray, agent_mat: np.ndarray,
                 objects: dict[str, np.ndarray]) -> np.ndarray:
     """The goal, hazards and vases lidars (16 bins each, concatenated) seen by the robot.
@@ -525,6 +537,7 @@ class PointGoalEnv(MujocoEnv, EzPickle):
         cost = hazard_cost(self._agent_xy(), self._hazards_xy())
         # numpy scalars (float subclasses): torchrl's info reader needs a dtype.
         info = {"cost": np.float64(cost), "cost_hazards": np.float64(cost),
+                "cost_margin": np.float64(hazard_margin(self._agent_xy(), self._hazards_xy())),
                 "goal_met": bool(goal_met)}
         terminated = False
         if goal_met:
@@ -538,6 +551,7 @@ class PointGoalEnv(MujocoEnv, EzPickle):
 
 _SOURCE = "Safety-Gymnasium 1.0 Goal level 1 (native rebuild on MuJoCo)"
 _COST_RULE = f"1 if the robot is inside one of the {NUM_HAZARDS} hazards (distance < {HAZARD_SIZE})"
+_MARGIN_RULE = f"distance to the nearest hazard minus {HAZARD_SIZE} (m)"
 
 #: The registry entries: Safety-Gymnasium's id and the paper's Gymnasium-API id (same task).
 GOAL_TASKS: tuple[TaskSpec, ...] = tuple(
@@ -550,6 +564,7 @@ GOAL_TASKS: tuple[TaskSpec, ...] = tuple(
         obs_dim=12 + LIDAR_NUM_BINS * len(LIDAR_OBJECTS),
         act_dim=2,
         cost_rule=_COST_RULE,
+        margin_rule=_MARGIN_RULE,
         alias_of=alias_of,
     )
     for name, alias_of in (

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import math
 from functools import partial
 from typing import Any, Literal
 
@@ -38,14 +39,18 @@ class CostInfoReader(BaseInfoDictReader):
     """Reads ``info["cost"]`` into a float32 ``"cost"`` entry shaped like torchrl's reward.
 
     A reset's info has no cost: it reads as 0. Gymnasium vector envs give one cost per copy.
+    With ``margin=True`` it also reads the task's graded margin ``info["cost_margin"]``
+    (:attr:`~s3rl_torchrl.envs.TaskSpec.margin_rule`) into ``"margin"``, the same shape; a
+    reset's info has none and reads as NaN (no step, no margin: nothing labels the reset row).
     """
 
-    def __init__(self, batch_size: tuple[int, ...] = ()):
+    def __init__(self, batch_size: tuple[int, ...] = (), *, margin: bool = False):
         self.batch_size = torch.Size(batch_size)
-        self._info_spec = Composite(
-            cost=Unbounded(shape=(*self.batch_size, 1), dtype=torch.float32),
-            shape=self.batch_size,
-        )
+        self.margin = bool(margin)
+        entries = {"cost": Unbounded(shape=(*self.batch_size, 1), dtype=torch.float32)}
+        if self.margin:
+            entries["margin"] = Unbounded(shape=(*self.batch_size, 1), dtype=torch.float32)
+        self._info_spec = Composite(**entries, shape=self.batch_size)
 
     def __call__(self, info_dict: dict[str, Any], tensordict: TensorDictBase) -> TensorDictBase:
         cost = info_dict.get("cost")
@@ -56,6 +61,15 @@ class CostInfoReader(BaseInfoDictReader):
             value = torch.as_tensor(np.asarray(cost, dtype=np.float32), device=tensordict.device)
             value = value.reshape(shape)
         tensordict.set("cost", value)
+        if self.margin:
+            margin = info_dict.get("cost_margin")
+            if margin is None:
+                value = torch.full(shape, math.nan, dtype=torch.float32, device=tensordict.device)
+            else:
+                value = torch.as_tensor(
+                    np.asarray(margin, dtype=np.float32), device=tensordict.device
+                ).reshape(shape)
+            tensordict.set("margin", value)
         return tensordict
 
     @property
@@ -86,6 +100,7 @@ def make_base_env(
     device: str | torch.device = "cpu",
     *,
     vectorization: Literal["sync", "async"] = "sync",
+    margin: bool = False,
     **gym_kwargs: Any,
 ) -> GymWrapper:
     """A registered task as a plain torchrl Gym env with the cost read from ``info``.
@@ -94,9 +109,12 @@ def make_base_env(
     that many copies (``vectorization="sync"``: one process; ``"async"``: one process per copy).
     Vector envs run with ``AutoresetMode.DISABLED`` so that torchrl, not Gymnasium, decides
     when a copy resets (torchrl's own reset semantics, no lost final observation).
+    ``margin=True`` also reads the task's graded margin into ``"margin"`` (:class:`CostInfoReader`).
     """
     spec = get_task(task)  # fail early, listing the valid names
     require_task_module(spec)
+    if margin:
+        require_margin(spec)
     if num_envs == 0:
         # GymEnv, not GymWrapper(gym.make(...)): it takes torchrl's own options too
         # (from_pixels, pixels_only, frame_skip) and passes the rest to gymnasium.make.
@@ -110,7 +128,19 @@ def make_base_env(
             **gym_kwargs,
         )
         env = GymWrapper(vector_env, device=device)
-    return env.set_info_dict_reader(CostInfoReader(env.batch_size))
+    return env.set_info_dict_reader(CostInfoReader(env.batch_size, margin=margin))
+
+
+def require_margin(spec: TaskSpec) -> None:
+    """Fail, naming the tasks that have one, when ``spec`` exposes no graded margin."""
+    if spec.margin_rule is None:
+        from s3rl_torchrl.envs.registry import TASKS
+
+        families = sorted({t.family for t in TASKS.values() if t.margin_rule})
+        raise ValueError(
+            f"Task {spec.env_id!r} exposes no graded safety margin (info['cost_margin']); the "
+            f"tasks of the {' and '.join(families)} families do."
+        )
 
 
 def make_env(
@@ -121,6 +151,7 @@ def make_env(
     *,
     batching: Batching = "sync_vector",
     cost_label: bool = True,
+    margin: bool = False,
     **gym_kwargs: Any,
 ) -> TransformedEnv:
     """Build a registered task (any family) as a TorchRL env.
@@ -142,9 +173,15 @@ def make_env(
             ``AsyncVectorEnv``, one process per copy), ``"serial"`` (torchrl ``SerialEnv``) or
             ``"parallel"`` (torchrl ``ParallelEnv``, one worker process per copy).
         cost_label: append :class:`~s3rl_torchrl.transforms.CostLabel` (``("next", "safe")``).
+        margin: also read the task's graded safety margin into ``("next", "margin")`` (float32
+            ``[..., 1]``, negative exactly when the step costs; :attr:`TaskSpec.margin_rule`).
+            A training-only label: the policy reads ``"observation"`` only. Raises for a task
+            without one.
         **gym_kwargs: passed to ``gymnasium.make`` (e.g. ``render_mode="rgb_array"``).
     """
     require_task_module(get_task(task))
+    if margin:
+        require_margin(get_task(task))
     if not isinstance(num_envs, int) or num_envs < 1:
         raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}.")
     if batching not in BATCHING_CHOICES:
@@ -154,12 +191,14 @@ def make_env(
 
     base: EnvBase
     if num_envs == 1:
-        base = make_base_env(task, device=device, **gym_kwargs)
+        base = make_base_env(task, device=device, margin=margin, **gym_kwargs)
     elif batching in ("sync_vector", "async_vector"):
         vectorization = "sync" if batching == "sync_vector" else "async"
-        base = make_base_env(task, num_envs, device, vectorization=vectorization, **gym_kwargs)
+        base = make_base_env(
+            task, num_envs, device, vectorization=vectorization, margin=margin, **gym_kwargs
+        )
     else:
-        create = partial(make_base_env, task, device=device, **gym_kwargs)
+        create = partial(make_base_env, task, device=device, margin=margin, **gym_kwargs)
         batched_cls = SerialEnv if batching == "serial" else ParallelEnv
         base = batched_cls(num_envs, create, device=device)
 

@@ -132,6 +132,7 @@ def _velocity_spec(registered: RegisteredTask) -> TaskSpec:
         obs_dim=task.v5_obs_dim if v5 else task.obs_dim,
         act_dim=task.act_dim,
         cost_rule=f"1 if {velocity} > {task.threshold}",
+        margin_rule=f"{task.threshold} - {velocity}",
         alias_of=task.env_id if registered.env_id == task.gymnasium_api_id else None,
         variant_of=task.env_id if v5 else None,
     )

@@ -33,6 +33,9 @@ class TaskSpec:
         obs_dim: observation size.
         act_dim: action size.
         cost_rule: the per-step cost in one line, e.g. ``"1 if vx > 3.2096"``.
+        margin_rule: the graded safety margin the task writes to ``info["cost_margin"]`` (read
+            by ``make_env(..., margin=True)`` into ``("next", "margin")``; negative exactly
+            when the step costs), e.g. ``"3.2096 - vx"``; ``None`` if the task exposes none.
         extra: the pip extra the task needs (e.g. ``"bullet"``), ``None`` if always available.
         registered_as: the Gymnasium id this package registers for the task when it differs
             from ``env_id`` (the Bullet tasks: ``"s3rl_torchrl/SafetyBallRun-v0"``, because the
@@ -53,6 +56,7 @@ class TaskSpec:
     obs_dim: int
     act_dim: int
     cost_rule: str
+    margin_rule: str | None = None
     extra: str | None = None
     registered_as: str | None = None
     requires_module: str | None = None

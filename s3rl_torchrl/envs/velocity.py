@@ -36,8 +36,24 @@ def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> n
     return np.float64(velocity > threshold)
 
 
+def velocity_margin(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
+    """The graded form of :func:`velocity_cost`: ``threshold - speed``, in the speed's units.
+
+    Positive below the limit, zero at it, negative above it: the cost is 1 exactly when the
+    margin is negative. A training-only label (``info["cost_margin"]``), never an observation.
+    """
+    if speed == "x":
+        velocity = float(info["x_velocity"])
+    elif speed == "xy":
+        velocity = math.hypot(float(info["x_velocity"]), float(info["y_velocity"]))
+    else:
+        raise ValueError(f"Unknown speed kind {speed!r}; valid kinds are 'x' and 'xy'.")
+    return np.float64(threshold - velocity)
+
+
 class VelocityCostMixin:
-    """Adds ``info["cost"]`` to a Gymnasium MuJoCo env's ``step``; everything else is untouched."""
+    """Adds ``info["cost"]`` (and the graded ``info["cost_margin"]``, :func:`velocity_margin`)
+    to a Gymnasium MuJoCo env's ``step``; everything else is untouched."""
 
     def __init__(self, *, cost_threshold: float, cost_speed: SpeedKind, **kwargs: Any):
         super().__init__(**kwargs)
@@ -49,6 +65,7 @@ class VelocityCostMixin:
     def step(self, action):
         observation, reward, terminated, truncated, info = super().step(action)
         info["cost"] = velocity_cost(info, self.cost_threshold, self.cost_speed)
+        info["cost_margin"] = velocity_margin(info, self.cost_threshold, self.cost_speed)
         return observation, reward, terminated, truncated, info
 
 

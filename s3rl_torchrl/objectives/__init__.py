@@ -6,6 +6,11 @@ from s3rl_torchrl.objectives.ddpg_lag import (  # noqa: F401
     ddpg_lag_update,
     make_ddpg_lag_optimizers,
 )
+from s3rl_torchrl.objectives.graded_infonce import (  # noqa: F401
+    GRADED_POSITIVES,
+    GradedInfoNCELoss,
+    graded_infonce_loss,
+)
 from s3rl_torchrl.objectives.infonce import (  # noqa: F401
     SafetyInfoNCELoss,
     infonce_logits,

@@ -221,7 +221,10 @@ class SafetyInfoNCELoss(LossModule):
             )
         return masks
 
-    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+    def _embed_roles(
+        self, tensordict: TensorDictBase
+    ) -> tuple[tuple[torch.Tensor, ...], tuple[torch.Tensor, ...]]:
+        """``(anchor, positive, negative)`` embeddings and the three role masks."""
         anchor_mask, positive_mask, negative_mask = self._split_roles(tensordict)
         observations = tensordict.select(*self.encoder.in_keys)
         if self.momentum_encoder:
@@ -238,7 +241,10 @@ class SafetyInfoNCELoss(LossModule):
             anchor = embeddings[anchor_mask]
             positive = embeddings[positive_mask]
             negative = embeddings[negative_mask]
+        return (anchor, positive, negative), (anchor_mask, positive_mask, negative_mask)
 
+    def forward(self, tensordict: TensorDictBase) -> TensorDictBase:
+        (anchor, positive, negative), _ = self._embed_roles(tensordict)
         logits = infonce_logits(anchor, positive, negative, self.temperature)
         target = torch.zeros(logits.shape[0], dtype=torch.long, device=logits.device)
         per_anchor = F.cross_entropy(logits, target, reduction="none")

@@ -35,6 +35,7 @@ from s3rl_torchrl.objectives import (
     DDPGLagLoss,
     DDPGLagOptimizers,
     ForeachSoftUpdate,
+    GradedInfoNCELoss,
     LagrangianController,
     LagrangianUpdater,
     LearnedLagrangian,
@@ -62,12 +63,24 @@ from s3rl_torchrl.trainer.schedule import (
     UpdateSchedule,
     collector_batch_frames,
 )
+from s3rl_torchrl.transforms import COST_TO_GO_KEY, CostToGo
 
 if TYPE_CHECKING:  # config.py imports FAMILIES from here
     from s3rl_torchrl.trainer.config import AlgoConfig, NetworkConfig, TrainConfig
 
 # Every registered task has one cost signal; the loss and the controllers take m >= 1.
 NUM_COSTS = 1
+
+# The binary safety label (CostLabel): the probe and the binary contrastive phase read it.
+SAFE_LABEL_KEY = ("next", "safe")
+# Where each graded contrastive label is stored (algo.contrastive_cfg.label).
+GRADED_LABEL_KEYS = {"cost_to_go": COST_TO_GO_KEY, "margin": ("next", "margin")}
+# The bins (sampler strata) of a graded label when contrastive_cfg.label_bins is null, in the
+# label's units. cost_to_go (gamma_c = 0.9, one cost per violating step): no cost in sight
+# (< 0.05: the next cost is ~30 or more steps away), a cost ahead, in or next to a violation
+# (>= 1), a sustained violation (>= 4). margin: violating (< 0), close to the limit, nearer
+# than 1, farther (metres for the Goal tasks, the speed's units for the velocity tasks).
+DEFAULT_LABEL_BINS = {"cost_to_go": (0.05, 1.0, 4.0), "margin": (0.0, 0.5, 1.0)}
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "relu": ReLU,  # nn.ReLU that stays fast under torch.compile (modules/activation.py)
@@ -85,6 +98,9 @@ def build_envs(cfg: TrainConfig) -> tuple[EnvBase, EnvBase]:
         seed=cfg.seed,
         device=cfg.device,
         batching=cfg.collector.batching,
+        # The graded margin is a training-only label: only the training env reads it, into
+        # ("next", "margin"), never into the observation.
+        margin=cfg.algo.contrastive and cfg.algo.contrastive_cfg.label == "margin",
     )
     test_env = make_env(
         cfg.task.name,
@@ -357,11 +373,20 @@ def build_contrastive_phase(
             "the replay buffer; on-policy: the FIFO of recent labelled states)"
         )
     c = algo.contrastive_cfg
-    infonce = SafetyInfoNCELoss(
-        get_policy_encoder(actor),
-        temperature=c.temperature,
-        momentum_encoder=c.momentum_tau is not None,
-    )
+    if c.graded:
+        infonce = GradedInfoNCELoss(
+            get_policy_encoder(actor),
+            temperature=c.temperature,
+            positives=c.positives,
+            momentum_encoder=c.momentum_tau is not None,
+        )
+        infonce.set_keys(label=GRADED_LABEL_KEYS[c.label])
+    else:
+        infonce = SafetyInfoNCELoss(
+            get_policy_encoder(actor),
+            temperature=c.temperature,
+            momentum_encoder=c.momentum_tau is not None,
+        )
     view = SafeUnsafeSampler.contrastive_view(replay_buffer, c.batch_size)
     updater = None
     if c.momentum_tau is not None:
@@ -410,15 +435,43 @@ def _sac_update(
     return update
 
 
+def graded_label(algo: AlgoConfig) -> str | None:
+    """The graded contrastive label of a run (``cost_to_go`` or ``margin``), None if binary."""
+    c = algo.contrastive_cfg
+    return c.label if algo.contrastive and c.graded else None
+
+
+def build_labeller(algo: AlgoConfig) -> CostToGo | None:
+    """What labels each collected batch before it is stored: :class:`CostToGo` for the
+    cost-to-go label (it needs the batch's time dimension), None otherwise (the binary label
+    and the margin come with every step)."""
+    if graded_label(algo) == "cost_to_go":
+        return CostToGo(algo.contrastive_cfg.label_gamma)
+    return None
+
+
+def build_sampler(algo: AlgoConfig) -> SafeUnsafeSampler:
+    """The sampler partitions the buffer by the label the contrastive phase contrasts: safe /
+    unsafe, or the bins of the graded label."""
+    label = graded_label(algo)
+    if label is None:
+        return SafeUnsafeSampler(SAFE_LABEL_KEY)
+    edges = algo.contrastive_cfg.label_bins
+    return SafeUnsafeSampler(
+        GRADED_LABEL_KEYS[label],
+        bin_edges=DEFAULT_LABEL_BINS[label] if edges is None else edges,
+    )
+
+
 def build_replay_buffer(algo: AlgoConfig) -> TensorDictReplayBuffer:
-    """One storage for everything; the sampler keeps the safe/unsafe partition as it writes.
+    """One storage for everything; the sampler keeps the label partition as it writes.
 
     Off-policy: the replay buffer the gradient steps sample. On-policy: the FIFO of the last
     ``buffer_size`` labelled states, for the contrastive phase and the probe only.
     """
     return TensorDictReplayBuffer(
         storage=LazyTensorStorage(algo.buffer_size),
-        sampler=SafeUnsafeSampler(),
+        sampler=build_sampler(algo),
         batch_size=algo.batch_size,
     )
 
@@ -434,9 +487,13 @@ def build_rollout_buffer(cfg: TrainConfig) -> TensorDictReplayBuffer:
 
 
 def _labelled_keys(agent: Agent, replay_buffer: TensorDictReplayBuffer) -> list:
-    """The sampler's safe/unsafe label and the policy encoder's inputs (the contrastive phase
-    and the probe embed them)."""
-    keys = [replay_buffer.sampler.label_key, *get_policy_encoder(agent.actor).in_keys]
+    """The sampler's label, the binary label (the probe's), and the policy encoder's inputs
+    (the contrastive phase and the probe embed them)."""
+    keys = [
+        replay_buffer.sampler.label_key,
+        SAFE_LABEL_KEY,
+        *get_policy_encoder(agent.actor).in_keys,
+    ]
     phase = agent.contrastive
     if phase is not None:
         role = phase.loss.tensor_keys.contrastive_role  # written by the sampler per batch
@@ -473,7 +530,15 @@ def build_updates(
     # Off-policy (OffPolicySchedule). n-step windows need consecutive batches of the same env
     # copies: the transform keeps the last n frames of each copy until the next batch (paper:
     # n = 2).
-    nstep = make_nstep_transform(algo.n_step, algo.gamma) if algo.n_step > 1 else None
+    # Labels describe their own step: n-step keeps them at t (a graded one as the binary one).
+    keep = ["safe"]
+    if graded_label(algo) is not None:
+        keep.append(GRADED_LABEL_KEYS[graded_label(algo)][-1])
+    nstep = (
+        make_nstep_transform(algo.n_step, algo.gamma, keep_keys=tuple(keep))
+        if algo.n_step > 1
+        else None
+    )
     # The losses' inputs (n-step reward and discount exponent included) and the labelled keys.
     keys = [*loss.in_keys, loss.value_estimator.tensor_keys.steps_to_next_obs, *labelled]
     return ReplayUpdates(

@@ -17,6 +17,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
+from s3rl_torchrl.objectives.graded_infonce import GRADED_POSITIVES
 from s3rl_torchrl.objectives.lagrangian import LAGRANGIAN_CADENCES
 from s3rl_torchrl.trainer.builders import FAMILIES
 from s3rl_torchrl.trainer.schedule import UpdateSchedule, collector_batch_frames
@@ -53,6 +54,9 @@ LOGGER_PACKAGES = {
     "mlflow": ("mlflow", "mlflow"),
 }
 DEVICES = ("cpu", "cuda", "mps")
+# The contrastive phase's safety label (docs/representation.md): the paper's binary safe/unsafe
+# label, the discounted cost-to-go (transforms.CostToGo) or the task's margin (TaskSpec).
+CONTRASTIVE_LABELS = ("binary", "cost_to_go", "margin")
 
 
 class ConfigError(ValueError):
@@ -169,6 +173,18 @@ class ContrastiveConfig:
     steps: int = 50  # E: InfoNCE steps per phase (enc_training_epoch)
     lr: float = 5e-4
     momentum_tau: float | None = None  # MoCo-style target encoder when set
+    # The safety label the phase contrasts: "binary" (the paper's, SafetyInfoNCELoss),
+    # "cost_to_go" or "margin" (graded: GradedInfoNCELoss, triplets drawn by label bin).
+    label: str = "binary"
+    label_gamma: float = 0.9  # cost_to_go's gamma_c (horizon ~ 1 / (1 - gamma_c) steps)
+    # Inner edges of the graded label's bins (the sampler's strata); None: the label's default
+    # (builders.DEFAULT_LABEL_BINS), in the label's units.
+    label_bins: list[float] | None = None
+    positives: str = "paired"  # graded loss: "paired" (Algorithm 4's pairs) or "all" (RnC)
+
+    @property
+    def graded(self) -> bool:
+        return self.label != "binary"
 
     def check(self, path: str) -> None:
         _check_range(f"{path}.temperature", self.temperature, 0.0, low_inclusive=False)
@@ -178,6 +194,19 @@ class ContrastiveConfig:
         _check_range(f"{path}.lr", self.lr, 0.0, low_inclusive=False)
         if self.momentum_tau is not None:
             _check_range(f"{path}.momentum_tau", self.momentum_tau, 0.0, 1.0, low_inclusive=False)
+        _check_choice(f"{path}.label", self.label, CONTRASTIVE_LABELS)
+        _check_choice(f"{path}.positives", self.positives, GRADED_POSITIVES)
+        if not 0.0 <= self.label_gamma < 1.0:
+            _fail(f"{path}.label_gamma", self.label_gamma, "must be in [0.0, 1.0)")
+        if self.label_bins is not None:
+            edges = list(self.label_bins)
+            increasing = all(a < b for a, b in zip(edges, edges[1:]))
+            if not edges or not increasing or len(edges) > 126:
+                _fail(
+                    f"{path}.label_bins",
+                    edges,
+                    "must be null or 1 to 126 strictly increasing bin edges",
+                )
 
 
 @dataclass
@@ -432,7 +461,24 @@ class TrainConfig:
                 f"must be a multiple of collector.frames_per_batch "
                 f"({self.collector.frames_per_batch})",
             )
+        self._check_contrastive_label(prefix)
         _check_learns(self.collector, self.algo, prefix)
+
+    def _check_contrastive_label(self, prefix: str) -> None:
+        path = prefix + "algo.contrastive_cfg.label"
+        label = self.algo.contrastive_cfg.label
+        if label == "binary":
+            return
+        if not self.algo.contrastive:
+            _fail(path, label, "a graded label needs the contrastive phase (algo.contrastive=true)")
+        if label == "margin" and get_task(self.task.name).margin_rule is None:
+            having = sorted({t.family for t in map(get_task, task_names()) if t.margin_rule})
+            _fail(
+                path,
+                label,
+                f"task {self.task.name} exposes no margin (the {' and '.join(having)} tasks do); "
+                "use binary or cost_to_go",
+            )
 
     def _check_seeds(self, path: str) -> None:
         seeds = list(self.seeds)

@@ -24,7 +24,8 @@ class ContrastivePhase:
     """Runs ``num_steps`` InfoNCE updates of the policy encoder, or skips when data is lacking.
 
     Args:
-        loss: the :class:`~s3rl_torchrl.objectives.SafetyInfoNCELoss` built on the policy encoder.
+        loss: the :class:`~s3rl_torchrl.objectives.SafetyInfoNCELoss` (or its graded subclass
+            :class:`~s3rl_torchrl.objectives.GradedInfoNCELoss`) built on the policy encoder.
         source: a replay buffer whose samples are contrastive triplet batches, normally
             ``SafeUnsafeSampler.contrastive_view(main_buffer, B)``. Its ``can_sample()`` decides
             the skip (paper, Algorithm 2: fewer than ``B`` unsafe or ``2B`` safe transitions).

@@ -42,12 +42,14 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
-from s3rl_torchrl.diagnostics.probe import replay_probe
+from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.builders import (
+    SAFE_LABEL_KEY,
     Agent,
     build_agent,
     build_envs,
+    build_labeller,
     build_replay_buffer,
     build_updates,
     set_torch_threads,
@@ -193,6 +195,9 @@ class Trainer:
         # Off-policy: the replay buffer; on-policy: the FIFO of recent labelled states that the
         # contrastive phase and the probe sample (builders.build_replay_buffer).
         self.replay_buffer = build_replay_buffer(cfg.algo)
+        # The graded cost-to-go label needs each collected batch's time dimension: it is
+        # written before the batch is stored (builders.build_labeller; None otherwise).
+        self.labeller = build_labeller(cfg.algo)
         # torch.compile of the SAC family's loss (its forward and, through AOTAutograd, its
         # backward); the optimiser and target steps stay eager (fused Adam, one foreach lerp).
         # The first steps pay the compile time (docs/benchmarks.md says when it pays off).
@@ -293,6 +298,8 @@ class Trainer:
         )
 
     def _store(self, batch: TensorDictBase) -> None:
+        if self.labeller is not None:
+            batch = self.labeller(batch)
         self.updates.store(batch)
 
     def _update_lagrangian(self, batch: TensorDictBase) -> None:
@@ -403,9 +410,21 @@ class Trainer:
             self.replay_buffer,
             get_policy_encoder(self.agent.actor),
             seed=self.cfg.seed * 1_000_003 + c.epochs,
-            label_key=self.replay_buffer.sampler.label_key,
+            label_key=SAFE_LABEL_KEY,
         )
         row["probe/accuracy"], row["probe/auc"] = probe.accuracy, probe.auc
+        sampler = self.replay_buffer.sampler
+        if sampler.graded:
+            # Does the embedding order states by the graded label it is trained on? Held-out
+            # Spearman and R^2 of a linear regression on a bin-balanced replay sample.
+            graded = replay_graded_probe(
+                self.replay_buffer,
+                get_policy_encoder(self.agent.actor),
+                seed=self.cfg.seed * 1_000_003 + c.epochs,
+                label_key=sampler.label_key,
+                bin_edges=sampler.bin_edges,
+            )
+            row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
         return row
 
     def _progress_postfix(self) -> dict[str, str]:

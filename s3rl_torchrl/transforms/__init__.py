@@ -1,6 +1,7 @@
 """TorchRL transforms for safe RL."""
 
 from s3rl_torchrl.transforms.cost_label import CostLabel
+from s3rl_torchrl.transforms.cost_to_go import COST_TO_GO_KEY, CostToGo, discounted_cost_to_go
 from s3rl_torchrl.transforms.episode_sum import EpisodeSum
 
-__all__ = ["CostLabel", "EpisodeSum"]
+__all__ = ["COST_TO_GO_KEY", "CostLabel", "CostToGo", "EpisodeSum", "discounted_cost_to_go"]

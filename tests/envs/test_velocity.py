@@ -88,7 +88,12 @@ def test_cost_follows_threshold_rule_and_robot_is_unchanged(robot, version):
     task = VELOCITY_REGISTRATIONS[f"Safety{robot}Velocity-{version}"].task
     for info_s, info_b in _rollout_pair(task.env_id, f"{robot}-v4", steps=150, seed=7):
         assert info_s["cost"] == reference_cost(info_b, robot, version)
-        assert {k: v for k, v in info_s.items() if k != "cost"} == info_b
+        # The graded margin (threshold - speed) is negative exactly when the step costs.
+        speed = reference_velocity(info_b, task.speed)
+        assert info_s["cost_margin"] == pytest.approx(task.threshold - speed, abs=1e-12)
+        assert (info_s["cost_margin"] < 0) == (info_s["cost"] == 1.0)
+        added = ("cost", "cost_margin")
+        assert {k: v for k, v in info_s.items() if k not in added} == info_b
 
 
 @pytest.mark.parametrize("robot,version", sorted(REFERENCE))
