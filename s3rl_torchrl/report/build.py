@@ -195,17 +195,45 @@ def _occupancy(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     return _table(header, rows, "llrrr")
 
 
+def _last_logged(group: RunGroup, column: str) -> MeanStd:
+    """The last logged value of a metrics.csv column in each finished run, over seeds."""
+    last = []
+    for run in group.finished:
+        values = [v for v in run.column(column)[1] if not math.isnan(v)]
+        if values:
+            last.append(values[-1])
+    return MeanStd.of(last, ddof=1)
+
+
 def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:
     """The last logged probe accuracy / AUC of each finished run, over seeds."""
-    acc, auc = [], []
-    for run in group.finished:
-        a = [v for v in run.column("probe/accuracy")[1] if not math.isnan(v)]
-        u = [v for v in run.column("probe/auc")[1] if not math.isnan(v)]
-        if a:
-            acc.append(a[-1])
-        if u:
-            auc.append(u[-1])
-    return MeanStd.of(acc, ddof=1), MeanStd.of(auc, ddof=1)
+    return _last_logged(group, "probe/accuracy"), _last_logged(group, "probe/auc")
+
+
+def _graded_probe(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+    """The graded probe of runs trained on a graded label (``algo.contrastive_cfg.label``):
+    the last logged ``probe/spearman`` and ``probe/r2`` per group; empty if none logged it."""
+    rows = []
+    for task, groups in by_task.items():
+        for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
+            spearman, r2 = _last_logged(group, "probe/spearman"), _last_logged(group, "probe/r2")
+            if spearman.n or r2.n:
+                label = group.runs[0].config["algo"].get("contrastive_cfg", {}).get("label")
+                rows.append([task, group.label, str(label), str(max(spearman.n, r2.n)),
+                             _ms(spearman), _ms(r2)])
+    if not rows:
+        return []
+    return [
+        "## The graded probe (training)",
+        "",
+        "Runs whose contrastive phase was trained on a graded label: the `probe/spearman` "
+        "(held-out Spearman correlation) and `probe/r2` (held-out R^2 of a linear regression "
+        "from the embedding to the label) columns of `metrics.csv` at the last epoch, mean ± "
+        "std over finished seeds (docs/representation.md).",
+        "",
+        *_table(["task", "algo", "label", "seeds", "Spearman", "R^2"], rows, "lllrrr"),
+        "",
+    ]
 
 
 def _figure4_run(group: RunGroup) -> tuple[Run | None, str]:
@@ -450,6 +478,7 @@ def build_report(
     else:
         lines += ["Not drawn (`--no-embeddings`, or no finished run).", ""]
 
+    lines += _graded_probe(by_task, reference)
     if report.notes:
         lines += ["## Notes", "", *[f"- {note}" for note in report.notes], ""]
     report.path.write_text("\n".join(lines))

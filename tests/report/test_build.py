@@ -357,3 +357,21 @@ def test_best_feasible_protocol_is_a_labelled_row_beside_the_last_policy(tmp_pat
     assert best_label not in "\n".join(
         line for line in old.splitlines() if line.startswith(f"| {TASK} |")
     )
+
+
+def test_graded_probe_table_lists_runs_trained_on_a_graded_label(tmp_path, make_run):
+    # Last logged values per seed (the NaN of epoch 1 skipped): Spearman 0.5, 0.7, R^2 0.2, 0.4.
+    for seed, (rho, r2) in {1: (0.5, 0.2), 2: (0.7, 0.4)}.items():
+        curve = {"frames": [200, 400, 600], "eval/reward": [1.0, 2.0, 3.0],
+                 "eval/cost": [0.0, 0.0, 0.0], "probe/spearman": [float("nan"), 0.1, rho],
+                 "probe/r2": [float("nan"), 0.0, r2]}
+        make_run(tmp_path / "graded" / f"s3rl_seed{seed}", TASK, "s3rl", seed, curve=curve,
+                 algo__contrastive_cfg={"label": "cost_to_go"})
+    text = build_report(tmp_path / "graded", tmp_path / "rep", embeddings=False).path.read_text()
+    assert "## The graded probe (training)" in text
+    row = next(line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | cost_to_go |"))
+    assert row == f"| {TASK} | s3rl | cost_to_go | 2 | 0.60 ± 0.14 | 0.30 ± 0.14 |"
+
+    make_run(tmp_path / "binary" / "s3rl_seed1", TASK, "s3rl", 1)
+    binary = build_report(tmp_path / "binary", tmp_path / "rep2", embeddings=False)
+    assert "graded probe" not in binary.path.read_text()
