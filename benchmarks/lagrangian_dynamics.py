@@ -221,7 +221,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
     frames = [_float(r["frames"]) for r in rows]
     half = frames[-1] / 2
     late = [r for r, f in zip(rows, frames) if f > half]
-    # The issue's target window: the last 20% of epochs (at least one).
+    # The targets' window (docs/results.md, "Holding the limit"): the last 20% of epochs.
     last20 = rows[-max(1, round(0.2 * len(rows))):]
     col = {key: [_float(r.get(key)) for r in late] for key in rows[0]}
 
