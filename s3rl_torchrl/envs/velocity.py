@@ -20,20 +20,22 @@ from gymnasium.utils import EzPickle
 from s3rl_torchrl.envs.registry import MAX_EPISODE_STEPS, VELOCITY_REGISTRATIONS, SpeedKind
 
 
-def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
-    """Safety-Gymnasium's velocity cost: 1.0 if the speed is strictly above ``threshold``.
-
-    ``speed="x"`` reads the signed forward velocity, so running backwards never costs;
-    ``speed="xy"`` reads the planar speed of the torso or centre of mass.
-    """
+def velocity_reading(info: dict[str, Any], speed: SpeedKind) -> float:
+    """The speed a velocity task's cost reads: ``speed="x"`` the signed forward velocity (so
+    running backwards never costs), ``speed="xy"`` the planar speed of the torso or centre of
+    mass."""
     if speed == "x":
-        velocity = float(info["x_velocity"])
-    elif speed == "xy":
-        velocity = math.hypot(float(info["x_velocity"]), float(info["y_velocity"]))
-    else:
-        raise ValueError(f"Unknown speed kind {speed!r}; valid kinds are 'x' and 'xy'.")
+        return float(info["x_velocity"])
+    if speed == "xy":
+        return math.hypot(float(info["x_velocity"]), float(info["y_velocity"]))
+    raise ValueError(f"Unknown speed kind {speed!r}; valid kinds are 'x' and 'xy'.")
+
+
+def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
+    """Safety-Gymnasium's velocity cost: 1.0 if the speed (:func:`velocity_reading`) is
+    strictly above ``threshold``."""
     # numpy scalar (a float subclass): torchrl's info reader needs a dtype.
-    return np.float64(velocity > threshold)
+    return np.float64(velocity_reading(info, speed) > threshold)
 
 
 def velocity_margin(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
@@ -42,13 +44,7 @@ def velocity_margin(info: dict[str, Any], threshold: float, speed: SpeedKind) ->
     Positive below the limit, zero at it, negative above it: the cost is 1 exactly when the
     margin is negative. A training-only label (``info["cost_margin"]``), never an observation.
     """
-    if speed == "x":
-        velocity = float(info["x_velocity"])
-    elif speed == "xy":
-        velocity = math.hypot(float(info["x_velocity"]), float(info["y_velocity"]))
-    else:
-        raise ValueError(f"Unknown speed kind {speed!r}; valid kinds are 'x' and 'xy'.")
-    return np.float64(threshold - velocity)
+    return np.float64(threshold - velocity_reading(info, speed))
 
 
 class VelocityCostMixin:
@@ -64,8 +60,9 @@ class VelocityCostMixin:
 
     def step(self, action):
         observation, reward, terminated, truncated, info = super().step(action)
-        info["cost"] = velocity_cost(info, self.cost_threshold, self.cost_speed)
-        info["cost_margin"] = velocity_margin(info, self.cost_threshold, self.cost_speed)
+        velocity = velocity_reading(info, self.cost_speed)  # read once for both
+        info["cost"] = np.float64(velocity > self.cost_threshold)
+        info["cost_margin"] = np.float64(self.cost_threshold - velocity)
         return observation, reward, terminated, truncated, info
 
 
