@@ -207,15 +207,11 @@ class GradedInfoNCELoss(SafetyInfoNCELoss):
             logits, anchor_label, candidate_label, self.positives
         )
         loss = self._reduce_loss(per_anchor, reduction=self.reduction)
-
+        # The positive's rivals are the candidates left in its denominator.
+        paired_mask = mask if self.positives == "paired" else mask[:, 0, :]
         with torch.no_grad():
-            cosine = logits * self.temperature
-            paired_mask = mask if self.positives == "paired" else mask[:, 0, :]
             rivals = logits[:, 1:].masked_fill(~paired_mask[:, 1:], -math.inf)
-            diagnostics = {
-                "pos_similarity": cosine[:, 0].mean(),
-                "neg_similarity": cosine[:, 1:].mean(),
-                "accuracy": (logits[:, 0] > rivals.amax(-1)).float().mean(),
-                "mi_lower_bound": size.float().log().mean() - per_anchor.mean(),
-            }
+        diagnostics = self._diagnostics(
+            logits, per_anchor, rivals=rivals, log_candidates=size.float().log().mean()
+        )
         return TensorDict({"loss_infonce": loss, **diagnostics}, batch_size=[])

@@ -249,15 +249,26 @@ class SafetyInfoNCELoss(LossModule):
         target = torch.zeros(logits.shape[0], dtype=torch.long, device=logits.device)
         per_anchor = F.cross_entropy(logits, target, reduction="none")
         loss = self._reduce_loss(per_anchor, reduction=self.reduction)
-
-        with torch.no_grad():
-            cosine = logits * self.temperature
-            num_candidates = logits.shape[-1]
-            mean_loss = per_anchor.mean()
-            diagnostics = {
-                "pos_similarity": cosine[:, 0].mean(),
-                "neg_similarity": cosine[:, 1:].mean(),
-                "accuracy": (logits[:, 0] > logits[:, 1:].amax(-1)).float().mean(),
-                "mi_lower_bound": math.log(num_candidates) - mean_loss,
-            }
+        diagnostics = self._diagnostics(
+            logits, per_anchor, rivals=logits[:, 1:], log_candidates=math.log(logits.shape[-1])
+        )
         return TensorDict({"loss_infonce": loss, **diagnostics}, batch_size=[])
+
+    @torch.no_grad()
+    def _diagnostics(
+        self,
+        logits: torch.Tensor,
+        per_anchor: torch.Tensor,
+        rivals: torch.Tensor,
+        log_candidates: float | torch.Tensor,
+    ) -> dict[str, torch.Tensor]:
+        """Cosine similarities of the positives and negatives, how often the positive beats
+        every rival, and the InfoNCE bound ``log(candidates) - loss`` on the mutual
+        information."""
+        cosine = logits * self.temperature
+        return {
+            "pos_similarity": cosine[:, 0].mean(),
+            "neg_similarity": cosine[:, 1:].mean(),
+            "accuracy": (logits[:, 0] > rivals.amax(-1)).float().mean(),
+            "mi_lower_bound": log_candidates - per_anchor.mean(),
+        }
