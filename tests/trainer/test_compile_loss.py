@@ -1,0 +1,55 @@
+"""``compile_loss`` drops dynamo's guards on module attributes: what changes during training
+(tensors, changed in place) must still reach the compiled loss, with no recompile."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from s3rl_torchrl.trainer import compile_loss
+from tests.objectives.test_sac_lag import make_batch, make_loss
+
+
+@pytest.mark.slow  # torch.compile of the loss
+def test_in_place_changes_reach_the_compiled_loss_without_recompiling():
+    loss, *_ = make_loss()
+    other, *_ = make_loss()
+    with torch.no_grad():  # other weights than `loss`'s, to load below
+        for value in other.parameters():
+            value.add_(0.1 * torch.randn_like(value))
+    compiled = compile_loss(loss)
+    batch = make_batch()
+    torch.manual_seed(0)
+    compiled(batch.copy())
+
+    def change_lambda():
+        loss.set_lagrangian(2.5)
+
+    def change_alpha():
+        with torch.no_grad():
+            loss.log_alpha.add_(1.0)
+
+    def load_weights():  # a checkpoint restored into the running loss
+        loss.load_state_dict(other.state_dict())
+
+    for change in (change_lambda, change_alpha, load_weights):
+        change()
+        with torch._dynamo.config.patch(error_on_recompile=True):
+            torch.manual_seed(0)
+            out = compiled(batch.copy())
+        torch.manual_seed(0)
+        eager = loss(batch.copy())
+        for key in ("loss_actor", "loss_qvalue", "loss_cost_qvalue", "loss_alpha"):
+            torch.testing.assert_close(out[key], eager[key], msg=f"{key} after {change.__name__}")
+
+
+@pytest.mark.slow
+def test_grad_mode_is_still_guarded():
+    # Global state keeps its guards: the loss called without grad is traced anew, no stale graph.
+    loss, *_ = make_loss()
+    compiled = compile_loss(loss)
+    batch = make_batch()
+    compiled(batch.copy())
+    with torch.no_grad():
+        out = compiled(batch.copy())
+    assert not out["loss_actor"].requires_grad
