@@ -53,11 +53,14 @@ bench: $(STAMP)
 
 # Rebuild the reports in docs/ from the small result files kept in results/ (config.json,
 # metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
-# Table 2 comparison of algorithms.
+# Table 2 comparison of algorithms, and the experiment=safe evidence.
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
+	$(BIN)/s3rl-report results/safe --out docs/safe
+	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/safe/*/seed* \
+		--out docs/safe/lagrangian.json --plot docs/safe/lagrangian.png
 	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
 		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
 
