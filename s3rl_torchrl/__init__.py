@@ -1,7 +1,7 @@
 """s3rl-torchrl: safe (constrained) reinforcement learning for TorchRL.
 
 Importing the package registers the velocity tasks with Gymnasium, and gives tensordict's
-``from_any`` a fast path for plain tensors (``_tensordict_fast_path``: 60 us less per
+``from_any`` a fast path for plain tensors (``_tensordict_fast_path``: 33 us less per
 ``TensorDictModule`` output).
 """
 
