@@ -102,3 +102,27 @@ def test_tiny_run_with_a_graded_label_logs_the_graded_probe(label, tiny_config, 
     assert not math.isnan(float(last["contrastive/loss_infonce"]))
     spearman, r2 = float(last["probe/spearman"]), float(last["probe/r2"])
     assert -1.0 <= spearman <= 1.0 and r2 <= 1.0
+
+
+def test_a_group_of_seeds_trains_each_on_its_graded_label(tiny_config, tmp_path):
+    # seeds=[...]: each seed stores its own cost-to-go labels (its labeller, its batches) and
+    # logs its own graded probe, as a single run does.
+    from s3rl_torchrl.trainer import MultiSeedTrainer
+    from s3rl_torchrl.trainer.builders import GRADED_LABEL_KEYS
+
+    cfg = tiny_config("algo=s3rl", "task=SafetyPointGoal1-v0",
+                      "algo.contrastive_cfg.label=cost_to_go", "seeds=[3,4]")
+    group = MultiSeedTrainer(cfg, tmp_path / "group")
+    result = group.run()
+    assert result.status == "finished"
+    key = GRADED_LABEL_KEYS["cost_to_go"]
+    stored = []
+    for member, run in zip(group.members, result.runs, strict=True):
+        assert run.counters.contrastive_phases > 0
+        with open(run.run_dir / "metrics.csv") as file:
+            last = list(csv.DictReader(file))[-1]
+        assert not math.isnan(float(last["contrastive/loss_infonce"]))
+        assert -1.0 <= float(last["probe/spearman"]) <= 1.0
+        stored.append(member.replay_buffer[:].get(key))
+    # Each seed's own episodes, so its own labels.
+    assert not torch.equal(stored[0], stored[1])
