@@ -18,7 +18,7 @@ from torchrl.data.tensor_specs import TensorSpec
 from torchrl.envs import EnvBase
 from torchrl.objectives import ClipPPOLoss, DDPGLoss, LossModule, SoftUpdate
 
-from s3rl_torchrl.data import SafeUnsafeSampler
+from s3rl_torchrl.data import GatherStorage, SafeUnsafeSampler
 from s3rl_torchrl.envs import make_env
 from s3rl_torchrl.modules import (
     ReLU,
@@ -468,9 +468,10 @@ def build_replay_buffer(algo: AlgoConfig) -> TensorDictReplayBuffer:
 
     Off-policy: the replay buffer the gradient steps sample. On-policy: the FIFO of the last
     ``buffer_size`` labelled states, for the contrastive phase and the probe only.
+    ``GatherStorage``: torchrl's storage with a faster gather of each sampled batch.
     """
     return TensorDictReplayBuffer(
-        storage=LazyTensorStorage(algo.buffer_size),
+        storage=GatherStorage(algo.buffer_size),
         sampler=build_sampler(algo),
         batch_size=algo.batch_size,
     )
