@@ -34,8 +34,7 @@ def velocity_reading(info: dict[str, Any], speed: SpeedKind) -> float:
 def velocity_cost(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
     """Safety-Gymnasium's velocity cost: 1.0 if the speed (:func:`velocity_reading`) is
     strictly above ``threshold``."""
-    # numpy scalar (a float subclass): torchrl's info reader needs a dtype.
-    return np.float64(velocity_reading(info, speed) > threshold)
+    return cost_of_margin(velocity_margin(info, threshold, speed))
 
 
 def velocity_margin(info: dict[str, Any], threshold: float, speed: SpeedKind) -> np.float64:
@@ -45,6 +44,13 @@ def velocity_margin(info: dict[str, Any], threshold: float, speed: SpeedKind) ->
     margin is negative. A training-only label (``info["cost_margin"]``), never an observation.
     """
     return np.float64(threshold - velocity_reading(info, speed))
+
+
+def cost_of_margin(margin: float) -> np.float64:
+    """1.0 where the margin is negative, i.e. the speed strictly above the threshold (IEEE
+    subtraction keeps the sign of ``threshold - speed``: zero only at equality)."""
+    # numpy scalar (a float subclass): torchrl's info reader needs a dtype.
+    return np.float64(margin < 0)
 
 
 class VelocityCostMixin:
@@ -60,9 +66,8 @@ class VelocityCostMixin:
 
     def step(self, action):
         observation, reward, terminated, truncated, info = super().step(action)
-        velocity = velocity_reading(info, self.cost_speed)  # read once for both
-        info["cost"] = np.float64(velocity > self.cost_threshold)
-        info["cost_margin"] = np.float64(self.cost_threshold - velocity)
+        margin = velocity_margin(info, self.cost_threshold, self.cost_speed)
+        info["cost"], info["cost_margin"] = cost_of_margin(margin), margin
         return observation, reward, terminated, truncated, info
 
 
