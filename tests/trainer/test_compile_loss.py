@@ -53,3 +53,13 @@ def test_grad_mode_is_still_guarded():
     with torch.no_grad():
         out = compiled(batch.copy())
     assert not out["loss_actor"].requires_grad
+
+
+@pytest.mark.slow
+def test_the_loss_forward_is_one_graph_without_breaks():
+    # A graph break splits the compiled step into pieces with Python between them (issue 28's
+    # "one compiled region"); torch._dynamo.explain counts them without running the compiler.
+    loss, *_ = make_loss()
+    explained = torch._dynamo.explain(loss)(make_batch())
+    assert explained.graph_break_count == 0, [b.reason for b in explained.break_reasons]
+    assert explained.graph_count == 1
