@@ -1,0 +1,97 @@
+"""The SAC-Lag gradient step as the recipe runs it (compiled loss forward; eager backward,
+three fused Adam steps and the target update) against the whole step in one ``torch.compile``
+region with compiled autograd (issue 28's "the whole update as one compiled region").
+
+    python benchmarks/whole_step_compile.py [--calls 100] [--rounds 9] \
+        [--out benchmarks/results/whole_step_compile.json]
+
+``experiment=paper``, SAC-Lag, SafetyHalfCheetahVelocity-v1, one thread, a batch of 256
+transitions of a short rollout. The whole-step case needs Adam with ``foreach`` (the recipe's
+``fused=True`` Adam is marked ``torch.compiler.disable``, a graph break per optimizer) and
+``torch._dynamo.config.compiled_autograd`` so that the backward is traced too.
+``torch._dynamo.explain`` reports the graph breaks left; both cases are timed in interleaved
+rounds in one process, with this process's CPU time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import torch
+from _report import interleaved_rounds, write_report
+from multiseed_throughput import env_rows, paper_agents, paper_config
+
+from s3rl_torchrl.trainer import compile_loss
+
+
+def foreach_adams(optimizers):
+    """The same parameter groups and settings in ``foreach`` Adams (compilable)."""
+    return [
+        torch.optim.Adam(
+            [{k: v for k, v in g.items() if k not in ("fused", "foreach")} for g in o.param_groups],
+            fused=False,
+            foreach=True,
+        )
+        for o in optimizers
+        if o is not None
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--calls", type=int, default=100)
+    parser.add_argument("--rounds", type=int, default=9)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/whole_step_compile.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    cfg = paper_config("SafetyHalfCheetahVelocity-v1", 2000, True, 1, None, 2000)
+    ((recipe_agent, env),) = paper_agents(cfg, 1, compile_first=compile_loss)
+    ((whole_agent, _),) = paper_agents(cfg, 1)
+    batch = env_rows(cfg, env, cfg.algo.batch_size)
+    loss, target_updater = whole_agent.loss, whole_agent.target_updater
+    optimizers = foreach_adams(whole_agent.optimizers)
+
+    def whole_step(batch):
+        losses = loss(batch)
+        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
+        for optimizer in optimizers:
+            optimizer.zero_grad(set_to_none=True)
+        total.backward()
+        for optimizer in optimizers:
+            optimizer.step()
+        target_updater.step()
+        return total.detach()
+
+    torch._dynamo.config.compiled_autograd = True
+    explained = torch._dynamo.explain(whole_step)(batch.copy())
+    breaks = sorted({" ".join(b.reason.split())[:240] for b in explained.break_reasons})
+    print({"graphs": explained.graph_count, "graph_breaks": explained.graph_break_count})
+    for reason in breaks:
+        print(" -", reason)
+    torch._dynamo.reset()
+    compiled_whole_step = compile_loss(whole_step)
+    cases = {
+        "recipe: compiled loss forward, eager backward + fused Adams + target update":
+            lambda: recipe_agent.update(batch.copy()),
+        "whole step in one torch.compile, compiled autograd, foreach Adams":
+            lambda: compiled_whole_step(batch.copy()),
+    }
+    times = interleaved_rounds(cases, calls=args.calls, rounds=args.rounds, warmup=30,
+                               clock=time.process_time)
+    rows = []
+    for name, values in times.items():
+        row = {"case": name, "median_ms_per_step": round(statistics.median(values) / 1e3, 2),
+               "min_ms_per_step": round(min(values) / 1e3, 2),
+               "max_ms_per_step": round(max(values) / 1e3, 2)}
+        print(row, flush=True)
+        rows.append(row)
+    write_report(args.out, {"rows": rows, "graphs": explained.graph_count,
+                            "graph_breaks": explained.graph_break_count,
+                            "graph_break_reasons": breaks})
+
+
+if __name__ == "__main__":
+    main()
