@@ -120,8 +120,14 @@ def _differences(
         compared = [(ref, base) for ref in finished if ref.algo == reference
                     for base in finished if base.algo != reference]
         # --compare A:B adds A minus B (e.g. s3rl_ddpg_lag:ddpg_lag) to the reference's rows.
-        compared += [(a, b) for first, second in pairs for a in finished if a.algo == first
-                     for b in finished if b.algo == second and a.algo != reference]
+        # A and B name algos or groups (a label as the tables print it, for groups split by
+        # --group-by: two S3RL variants are one algo).
+        for first, second in pairs:
+            for a in finished:
+                for b in finished:
+                    new = a is not b and _names(a, first) and _names(b, second)
+                    if new and not any(a is x and b is y for x, y in compared):
+                        compared.append((a, b))
         for ref, base in compared:
             for protocol, label in PROTOCOLS.items():
                 ref_read, base_read = under_protocol(ref, protocol), under_protocol(base, protocol)
@@ -139,6 +145,11 @@ def _differences(
     header = ["task", "metric", "difference", "over seeds", "paired t-test",
               "over episodes", "Welch t-test", "evaluated"]
     return _table(header, rows, "lllrlrll")
+
+
+def _names(group: RunGroup, name: str) -> bool:
+    """Whether ``--compare``'s ``name`` is ``group``'s algo or its label."""
+    return name in (group.algo, group.label)
 
 
 def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:

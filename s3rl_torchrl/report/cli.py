@@ -39,7 +39,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
                         help="the algo compared with every other one (default: s3rl)")
     parser.add_argument("--compare", action="append", default=[], metavar="A:B",
                         type=_pair,
-                        help="also test algo A minus algo B (e.g. s3rl_ddpg_lag:ddpg_lag); "
+                        help="also test algo A minus algo B (e.g. s3rl_ddpg_lag:ddpg_lag); A "
+                             "and B may also be group labels as the tables print them, for "
+                             "groups split by --group-by (e.g. 's3rl (algo.contrastive_cfg."
+                             "label=cost_to_go):s3rl (algo.contrastive_cfg.label=binary)'); "
                              "repeatable")
     parser.add_argument("--group-by", action="append", default=[], metavar="KEY",
                         help="a config key (dotted, e.g. algo.pid.kp) that splits the runs of "

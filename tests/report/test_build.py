@@ -315,6 +315,33 @@ def test_compare_adds_pairs_beside_the_reference(tmp_path, make_run, capsys):
     assert "expected two algos as A:B" in capsys.readouterr().err
 
 
+def test_compare_names_groups_split_by_group_by(tmp_path, make_run):
+    """Two S3RL variants (one algo, split by --group-by) are compared by their labels."""
+    rewards = {}
+    for label, shift in (("binary", 0.0), ("cost_to_go", 5.0)):
+        for seed in (1, 2, 3):
+            r = [100.0 + 10 * seed + i + shift * (seed % 2 + 1) for i in range(4)]
+            rewards[label, seed] = r
+            episodes = {"rewards": r, "costs": [1.0, 0.0, 2.0, 1.0], "lengths": [50] * 4,
+                        "safe_steps": [49, 50, 48, 49]}
+            make_run(tmp_path / "sweep" / f"{label}_seed{seed}", TASK, "s3rl", seed, episodes,
+                     algo__contrastive_cfg={"label": label})
+    graded, binary = (f"s3rl (algo.contrastive_cfg.label={v})" for v in ("cost_to_go", "binary"))
+    assert main([str(tmp_path / "sweep"), "--out", str(tmp_path / "rep"), "--no-embeddings",
+                 "--group-by", "algo.contrastive_cfg.label",
+                 "--compare", f"{graded}:{binary}"]) == 0
+    lines = (tmp_path / "rep" / "report.md").read_text().splitlines()
+    row = next(line for line in lines if f"| reward | {graded} − {binary} |" in line)
+    paired = stats.ttest_rel([np.mean(rewards["cost_to_go", s]) for s in (1, 2, 3)],
+                             [np.mean(rewards["binary", s]) for s in (1, 2, 3)])
+    ci = paired.confidence_interval(0.95)
+    difference = np.mean([np.mean(rewards["cost_to_go", s]) - np.mean(rewards["binary", s])
+                          for s in (1, 2, 3)])
+    assert f"| {difference:.2f} | p = {paired.pvalue:.2g}, CI [{ci.low:.2f}, {ci.high:.2f}] " \
+           "(3 pairs) |" in row
+    assert sum(f"{graded} − {binary}" in line for line in lines) == 2  # reward and cost
+
+
 def test_frame_ticks_are_short_enough_not_to_overlap():
     from s3rl_torchrl.report.figures import _frames_formatter
 
