@@ -51,9 +51,14 @@ test-fast: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python benchmarks/env_throughput.py
 
+# S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
+GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
+BINARY = s3rl (algo.contrastive_cfg.label=binary)
+
 # Rebuild the reports in docs/ from the small result files kept in results/ (config.json,
 # metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
-# Table 2 comparison of algorithms, and the experiment=safe evidence.
+# Table 2 comparison of algorithms, the experiment=safe evidence, and the 300k-frame
+# experiment=safe runs (SafetyPointGoal1, graded labels).
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
@@ -61,6 +66,10 @@ report: $(STAMP)
 	$(BIN)/s3rl-report results/safe --out docs/safe
 	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/safe/*/seed* \
 		--out docs/safe/lagrangian.json --plot docs/safe/lagrangian.png
+	$(BIN)/s3rl-report results/safe_300k --out docs/safe_300k \
+		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
+	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/safe_300k/*/seed* \
+		--out docs/safe_300k/lagrangian.json --plot docs/safe_300k/lagrangian.png
 	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
 		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
 
