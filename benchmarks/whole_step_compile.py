@@ -25,6 +25,7 @@ from _report import interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 
 from s3rl_torchrl.trainer import compile_loss
+from s3rl_torchrl.trainer.builders import _sac_update
 
 
 def foreach_adams(optimizers):
@@ -54,16 +55,9 @@ def main() -> None:
     loss, target_updater = whole_agent.loss, whole_agent.target_updater
     optimizers = foreach_adams(whole_agent.optimizers)
 
-    def whole_step(batch):
-        losses = loss(batch)
-        total = sum(v for k, v in losses.items() if k.startswith("loss_"))
-        for optimizer in optimizers:
-            optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        for optimizer in optimizers:
-            optimizer.step()
-        target_updater.step()
-        return total.detach()
+    # The recipe's own gradient step (loss, backward, optimizers, target update), uncompiled
+    # inside, so that one torch.compile below takes all of it.
+    whole_step = _sac_update(loss, optimizers, target_updater, cfg.algo.update_order, lambda fn: fn)
 
     torch._dynamo.config.compiled_autograd = True
     explained = torch._dynamo.explain(whole_step)(batch.copy())
