@@ -242,7 +242,8 @@ def replay_graded_probe(
     transitions in all) are drawn without replacement with a ``torch.Generator`` seeded by
     ``seed`` (the global RNGs are untouched). Balancing keeps the rare high-risk bins in the
     sample, as :func:`replay_probe` balances safe and unsafe. The label describes ``s_t``, the
-    row's root ``"observation"``, which ``encoder`` embeds.
+    row's root ``"observation"``, which ``encoder`` embeds. Rows whose label is NaN (stored
+    before the run stored the label) are left out.
     """
     storage = replay_buffer.storage
     size = len(storage)
@@ -255,12 +256,16 @@ def replay_graded_probe(
     else:
         edges = torch.tensor(list(bin_edges), dtype=labels.dtype)
         bins = torch.bucketize(labels, edges, right=True)
+    # NaN: a step stored before its run stored the label (a resumed older checkpoint).
+    bins[labels.isnan()] = -1
     generator = torch.Generator().manual_seed(int(seed))
     picked = []
     for k in range(int(bins.max()) + 1):
         index = (bins == k).nonzero().squeeze(-1)
         order = torch.randperm(len(index), generator=generator)[:per_bin]
         picked.append(index[order])
+    if not picked:
+        return graded_probe(np.zeros((0, 1)), np.zeros(0))
     index = torch.cat(picked)
     device = next(encoder.parameters()).device
     with torch.no_grad():

@@ -222,27 +222,42 @@ def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:
 
 
 def _graded_probe(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
-    """The graded probe of runs trained on a graded label (``algo.contrastive_cfg.label``):
-    the last logged ``probe/spearman`` and ``probe/r2`` per group; empty if none logged it."""
+    """The graded probe per group: the last logged ``probe/spearman`` and ``probe/r2``, with
+    the label the contrastive phase was trained on and the label probed (the run's graded
+    label, else the cost-to-go: ``builders.probe_label``); empty if no run logged it."""
+    from s3rl_torchrl.trainer.builders import probe_label
+    from s3rl_torchrl.trainer.config import AlgoConfig, ContrastiveConfig
+
     rows = []
     for task, groups in by_task.items():
         for group in sorted(groups, key=lambda g: (g.algo != reference, g.label)):
             spearman, r2 = _last_logged(group, "probe/spearman"), _last_logged(group, "probe/r2")
             if spearman.n or r2.n:
-                label = group.runs[0].config["algo"].get("contrastive_cfg", {}).get("label")
-                rows.append([task, group.label, str(label), str(max(spearman.n, r2.n)),
-                             _ms(spearman), _ms(r2)])
+                algo = group.runs[0].config["algo"]
+                contrastive = ContrastiveConfig(
+                    label=algo.get("contrastive_cfg", {}).get("label", "binary")
+                )
+                contrastive_algo = bool(algo.get("contrastive", False))
+                probed = probe_label(
+                    AlgoConfig(contrastive=contrastive_algo, contrastive_cfg=contrastive)
+                )
+                trained = contrastive.label if contrastive_algo else "none"
+                rows.append([task, group.label, trained, probed,
+                             str(max(spearman.n, r2.n)), _ms(spearman), _ms(r2)])
     if not rows:
         return []
     return [
         "## The graded probe (training)",
         "",
-        "Runs whose contrastive phase was trained on a graded label: the `probe/spearman` "
+        "Does the policy encoder order states by a graded label? The `probe/spearman` "
         "(held-out Spearman correlation) and `probe/r2` (held-out R^2 of a linear regression "
         "from the embedding to the label) columns of `metrics.csv` at the last epoch, mean ± "
-        "std over finished seeds (docs/representation.md).",
+        "std over finished seeds. The probed label is the one the contrastive phase was "
+        "trained on, or the cost-to-go for binary runs and algos without the phase "
+        "(docs/representation.md).",
         "",
-        *_table(["task", "algo", "label", "seeds", "Spearman", "R^2"], rows, "lllrrr"),
+        *_table(["task", "algo", "contrastive label", "probed label", "seeds", "Spearman",
+                 "R^2"], rows, "llllrrr"),
         "",
     ]
 

@@ -98,9 +98,9 @@ def build_envs(cfg: TrainConfig) -> tuple[EnvBase, EnvBase]:
         seed=cfg.seed,
         device=cfg.device,
         batching=cfg.collector.batching,
-        # The graded margin is a training-only label: only the training env reads it, into
-        # ("next", "margin"), never into the observation.
-        margin=cfg.algo.contrastive and cfg.algo.contrastive_cfg.label == "margin",
+        # The graded margin is a training-only label (contrasted or probed): only the training
+        # env reads it, into ("next", "margin"), never into the observation.
+        margin=probe_label(cfg.algo) == "margin",
     )
     test_env = make_env(
         cfg.task.name,
@@ -441,11 +441,28 @@ def graded_label(algo: AlgoConfig) -> str | None:
     return c.label if algo.contrastive and c.graded else None
 
 
+def probe_label(algo: AlgoConfig) -> str:
+    """The graded label the graded probe measures: the run's graded contrastive label, else
+    ``cost_to_go`` (every task has a cost), so that binary and graded runs, and the baselines,
+    are probed on the same label (the binary probe, too, runs for every algo)."""
+    return graded_label(algo) or "cost_to_go"
+
+
+def probe_label_bins(algo: AlgoConfig) -> tuple[float, ...]:
+    """The probe's bins: the graded sampler's strata (``contrastive_cfg.label_bins``, else the
+    label's :data:`DEFAULT_LABEL_BINS`), so a binary run's probe balances the same bins as the
+    graded run it is compared with."""
+    edges = algo.contrastive_cfg.label_bins
+    return DEFAULT_LABEL_BINS[probe_label(algo)] if edges is None else tuple(edges)
+
+
 def build_labeller(algo: AlgoConfig) -> CostToGo | None:
-    """What labels each collected batch before it is stored: :class:`CostToGo` for the
-    cost-to-go label (it needs the batch's time dimension), None otherwise (the binary label
-    and the margin come with every step)."""
-    if graded_label(algo) == "cost_to_go":
+    """What labels each collected batch before it is stored: :class:`CostToGo` when the run
+    contrasts or probes the cost-to-go label (it needs the batch's time dimension), None
+    otherwise (the binary label and the margin come with every step). Labelling does not
+    change what is trained: it adds one entry to each stored step and draws no random
+    numbers."""
+    if probe_label(algo) == "cost_to_go":
         return CostToGo(algo.contrastive_cfg.label_gamma)
     return None
 
@@ -456,11 +473,7 @@ def build_sampler(algo: AlgoConfig) -> SafeUnsafeSampler:
     label = graded_label(algo)
     if label is None:
         return SafeUnsafeSampler(SAFE_LABEL_KEY)
-    edges = algo.contrastive_cfg.label_bins
-    return SafeUnsafeSampler(
-        GRADED_LABEL_KEYS[label],
-        bin_edges=DEFAULT_LABEL_BINS[label] if edges is None else edges,
-    )
+    return SafeUnsafeSampler(GRADED_LABEL_KEYS[label], bin_edges=probe_label_bins(algo))
 
 
 def build_replay_buffer(algo: AlgoConfig) -> TensorDictReplayBuffer:
@@ -487,12 +500,15 @@ def build_rollout_buffer(cfg: TrainConfig) -> TensorDictReplayBuffer:
     )
 
 
-def _labelled_keys(agent: Agent, replay_buffer: TensorDictReplayBuffer) -> list:
-    """The sampler's label, the binary label (the probe's), and the policy encoder's inputs
-    (the contrastive phase and the probe embed them)."""
+def _labelled_keys(
+    algo: AlgoConfig, agent: Agent, replay_buffer: TensorDictReplayBuffer
+) -> list:
+    """The sampler's label, the binary and graded probes' labels, and the policy encoder's
+    inputs (the contrastive phase and the probes embed them)."""
     keys = [
         replay_buffer.sampler.label_key,
         SAFE_LABEL_KEY,
+        GRADED_LABEL_KEYS[probe_label(algo)],
         *get_policy_encoder(agent.actor).in_keys,
     ]
     phase = agent.contrastive
@@ -513,7 +529,7 @@ def build_updates(
     """
     algo, loss = cfg.algo, agent.loss
     schedule = algo.schedule(cfg.collector)
-    labelled = _labelled_keys(agent, replay_buffer)
+    labelled = _labelled_keys(algo, agent, replay_buffer)
     if isinstance(schedule, OnPolicySchedule):
         keys = list(loss.in_keys)
         advantage_keys = ("advantage", "value_target", "cost_advantage", "cost_value_target")
@@ -532,9 +548,7 @@ def build_updates(
     # copies: the transform keeps the last n frames of each copy until the next batch (paper:
     # n = 2).
     # Labels describe their own step: n-step keeps them at t (a graded one as the binary one).
-    keep = ["safe"]
-    if graded_label(algo) is not None:
-        keep.append(GRADED_LABEL_KEYS[graded_label(algo)][-1])
+    keep = ["safe", GRADED_LABEL_KEYS[probe_label(algo)][-1]]
     nstep = (
         make_nstep_transform(algo.n_step, algo.gamma, keep_keys=tuple(keep))
         if algo.n_step > 1

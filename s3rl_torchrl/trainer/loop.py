@@ -45,6 +45,7 @@ from tqdm.auto import tqdm
 from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.builders import (
+    GRADED_LABEL_KEYS,
     SAFE_LABEL_KEY,
     Agent,
     build_agent,
@@ -52,6 +53,8 @@ from s3rl_torchrl.trainer.builders import (
     build_labeller,
     build_replay_buffer,
     build_updates,
+    probe_label,
+    probe_label_bins,
     set_torch_threads,
 )
 from s3rl_torchrl.trainer.checkpoint import (
@@ -207,8 +210,8 @@ class Trainer:
         # Off-policy: the replay buffer; on-policy: the FIFO of recent labelled states that the
         # contrastive phase and the probe sample (builders.build_replay_buffer).
         self.replay_buffer = build_replay_buffer(cfg.algo)
-        # The graded cost-to-go label needs each collected batch's time dimension: it is
-        # written before the batch is stored (builders.build_labeller; None otherwise).
+        # The cost-to-go label (contrasted, or probed) needs each collected batch's time
+        # dimension: it is written before the batch is stored (builders.build_labeller).
         self.labeller = build_labeller(cfg.algo)
         # torch.compile of the SAC family's loss (its forward and, through AOTAutograd, its
         # backward); the optimiser and target steps stay eager (fused Adam, one foreach lerp).
@@ -425,18 +428,17 @@ class Trainer:
             label_key=SAFE_LABEL_KEY,
         )
         row["probe/accuracy"], row["probe/auc"] = probe.accuracy, probe.auc
-        sampler = self.replay_buffer.sampler
-        if sampler.graded:
-            # Does the embedding order states by the graded label it is trained on? Held-out
-            # Spearman and R^2 of a linear regression on a bin-balanced replay sample.
-            graded = replay_graded_probe(
-                self.replay_buffer,
-                get_policy_encoder(self.agent.actor),
-                seed=self.cfg.seed * 1_000_003 + c.epochs,
-                label_key=sampler.label_key,
-                bin_edges=sampler.bin_edges,
-            )
-            row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
+        # Does the embedding order states by a graded label: the one the run is trained on, or
+        # the cost-to-go in binary runs and baselines (builders.probe_label)? Held-out Spearman
+        # and R^2 of a linear regression on a bin-balanced replay sample.
+        graded = replay_graded_probe(
+            self.replay_buffer,
+            get_policy_encoder(self.agent.actor),
+            seed=self.cfg.seed * 1_000_003 + c.epochs,
+            label_key=GRADED_LABEL_KEYS[probe_label(self.cfg.algo)],
+            bin_edges=probe_label_bins(self.cfg.algo),
+        )
+        row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
         return row
 
     def _progress_postfix(self) -> dict[str, str]:
@@ -540,10 +542,23 @@ class Trainer:
         if agent.contrastive is not None:
             agent.contrastive.load_state_dict(state["contrastive"])
         self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
+        self._label_unlabelled_steps()
         self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         self.best = BestFeasible(**state.get("best_feasible", {}))
         restore_rng_state(state["rng"])
+
+    def _label_unlabelled_steps(self) -> None:
+        """A checkpoint written before every run stored its probed label (binary runs and
+        baselines had no cost-to-go): its stored steps get a NaN label, which the graded probe
+        leaves out, so the run resumes and new steps carry the label. Nothing else in the
+        buffer changes."""
+        storage = self.replay_buffer.storage
+        key = GRADED_LABEL_KEYS[probe_label(self.cfg.algo)]
+        if not storage.initialized or key in storage._storage.keys(include_nested=True):
+            return
+        like = storage._storage.get(SAFE_LABEL_KEY)
+        storage._storage.set(key, torch.full(like.shape, math.nan, dtype=torch.float32))
 
 
 def check_total_frames(cfg: TrainConfig, frames: int) -> None:

@@ -386,19 +386,30 @@ def test_best_feasible_protocol_is_a_labelled_row_beside_the_last_policy(tmp_pat
     )
 
 
-def test_graded_probe_table_lists_runs_trained_on_a_graded_label(tmp_path, make_run):
+def test_graded_probe_table_names_the_trained_and_the_probed_label(tmp_path, make_run):
     # Last logged values per seed (the NaN of epoch 1 skipped): Spearman 0.5, 0.7, R^2 0.2, 0.4.
     for seed, (rho, r2) in {1: (0.5, 0.2), 2: (0.7, 0.4)}.items():
         curve = {"frames": [200, 400, 600], "eval/reward": [1.0, 2.0, 3.0],
                  "eval/cost": [0.0, 0.0, 0.0], "probe/spearman": [float("nan"), 0.1, rho],
                  "probe/r2": [float("nan"), 0.0, r2]}
         make_run(tmp_path / "graded" / f"s3rl_seed{seed}", TASK, "s3rl", seed, curve=curve,
-                 algo__contrastive_cfg={"label": "cost_to_go"})
+                 algo__contrastive_cfg={"label": "margin"})
     text = build_report(tmp_path / "graded", tmp_path / "rep", embeddings=False).path.read_text()
     assert "## The graded probe (training)" in text
-    row = next(line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | cost_to_go |"))
-    assert row == f"| {TASK} | s3rl | cost_to_go | 2 | 0.60 ± 0.14 | 0.30 ± 0.14 |"
+    row = next(line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | margin"))
+    assert row == f"| {TASK} | s3rl | margin | margin | 2 | 0.60 ± 0.14 | 0.30 ± 0.14 |"
 
-    make_run(tmp_path / "binary" / "s3rl_seed1", TASK, "s3rl", 1)
-    binary = build_report(tmp_path / "binary", tmp_path / "rep2", embeddings=False)
-    assert "graded probe" not in binary.path.read_text()
+    # Binary S3RL and an algo without the contrastive phase are probed on the cost-to-go.
+    curve = {"frames": [200], "eval/reward": [1.0], "eval/cost": [0.0],
+             "probe/spearman": [0.25], "probe/r2": [0.5]}
+    make_run(tmp_path / "binary" / "s3rl_seed1", TASK, "s3rl", 1, curve=curve)
+    make_run(tmp_path / "binary" / "sac_lag_seed1", TASK, "sac_lag", 1, curve=curve)
+    lines = build_report(tmp_path / "binary", tmp_path / "rep2",
+                         embeddings=False).path.read_text().splitlines()
+    assert f"| {TASK} | s3rl | binary | cost_to_go | 1 | 0.25 | 0.50 |" in lines
+    assert f"| {TASK} | sac_lag | none | cost_to_go | 1 | 0.25 | 0.50 |" in lines
+
+    # Runs that logged no graded probe (before every run did): no table.
+    make_run(tmp_path / "old" / "s3rl_seed1", TASK, "s3rl", 1)
+    old = build_report(tmp_path / "old", tmp_path / "rep3", embeddings=False)
+    assert "graded probe" not in old.path.read_text()

@@ -10,10 +10,13 @@ import torch
 from torchrl.data import Bounded
 
 from s3rl_torchrl.data import SafeUnsafeSampler
-from s3rl_torchrl.modules import build_s3rl_actor
+from s3rl_torchrl.diagnostics import replay_graded_probe
+from s3rl_torchrl.modules import build_s3rl_actor, get_policy_encoder
 from s3rl_torchrl.objectives import GradedInfoNCELoss, SafetyInfoNCELoss
-from s3rl_torchrl.trainer import ConfigError, train, validate
+from s3rl_torchrl.trainer import ConfigError, Trainer, builders, loop, train, validate
 from s3rl_torchrl.trainer.builders import build_contrastive_phase, build_replay_buffer
+
+COST_TO_GO = ("next", "cost_to_go")
 
 
 @pytest.mark.parametrize(
@@ -126,3 +129,71 @@ def test_a_group_of_seeds_trains_each_on_its_graded_label(tiny_config, tmp_path)
         stored.append(member.replay_buffer[:].get(key))
     # Each seed's own episodes, so its own labels.
     assert not torch.equal(stored[0], stored[1])
+
+
+def _rows(run_dir) -> list[dict]:
+    with open(run_dir / "metrics.csv") as file:
+        return list(csv.DictReader(file))
+
+
+@pytest.mark.parametrize("algo", ["s3rl", "sac_lag", "ppo_lag"])
+def test_binary_runs_and_baselines_probe_the_cost_to_go(algo, tiny_config, tmp_path):
+    # The graded probe runs for every algo, as the binary one does: on the cost-to-go when
+    # the run contrasts no graded label. Each stored step carries its label.
+    trainer = Trainer(tiny_config(f"algo={algo}", "task=SafetyPointGoal1-v0"), tmp_path / algo)
+    assert trainer.run().status == "finished"
+    last = _rows(tmp_path / algo)[-1]
+    assert -1.0 <= float(last["probe/spearman"]) <= 1.0 and float(last["probe/r2"]) <= 1.0
+    stored = trainer.replay_buffer[:]
+    cost_to_go, safe = stored.get(COST_TO_GO), stored.get(("next", "safe"))
+    # G_t = c_t + gamma_c * G_{t+1} >= c_t >= 0, and c_t > 0 exactly where s_t is unsafe.
+    assert (cost_to_go >= 0).all() and (cost_to_go[~safe] > 0).all()
+    assert (~safe).any() and (cost_to_go[safe] > 0).any()  # costs ahead of safe steps
+
+
+def test_what_the_probe_measures_does_not_change_what_is_trained(
+    tiny_config, tmp_path, monkeypatch
+):
+    # Binary S3RL probed on the cost-to-go (labelled before storing) against the same run
+    # probed on the margin (no labeller; every step has it): equal training, probe aside.
+    overrides = ("algo=s3rl", "task=SafetyPointGoal1-v0")
+    train(tiny_config(*overrides), tmp_path / "cost_to_go")
+    for module in (builders, loop):
+        monkeypatch.setattr(module, "probe_label", lambda algo: "margin")
+    assert builders.build_labeller(tiny_config(*overrides).algo) is None
+    train(tiny_config(*overrides), tmp_path / "margin")
+    probed, other = _rows(tmp_path / "cost_to_go"), _rows(tmp_path / "margin")
+    assert len(probed) == len(other) > 1
+    for a, b in zip(probed, other, strict=True):
+        assert a["probe/spearman"] != b["probe/spearman"]
+        for key in ("probe/spearman", "probe/r2", "eval/seconds"):
+            a.pop(key), b.pop(key)
+        assert a == b
+
+
+def test_a_checkpoint_without_the_probed_label_resumes(tiny_config, tmp_path):
+    # A checkpoint written before binary runs stored the cost-to-go: its steps get NaN, which
+    # the probe skips; the resumed run stores the label from then on.
+    overrides = ("algo=s3rl", "task=SafetyPointGoal1-v0")
+
+    def stop_after_first_epoch(trainer: Trainer, row):
+        trainer.stop.requested = True
+
+    part = Trainer(tiny_config(*overrides), tmp_path / "part", stop_after_first_epoch)
+    part.run()
+    part.replay_buffer.storage._storage.del_(COST_TO_GO)
+    part.save()
+    stored = len(part.replay_buffer)
+    cfg = tiny_config(*overrides)
+    cfg.resume = str(tmp_path / "part")
+    resumed = Trainer(cfg, tmp_path / "ignored")
+    labels = resumed.replay_buffer[:].get(COST_TO_GO)
+    assert labels.isnan().all() and len(labels) == stored
+    assert resumed.run().status == "finished"
+    labels = resumed.replay_buffer[:].get(COST_TO_GO)
+    assert labels[:stored].isnan().all() and not labels[stored:].isnan().any()
+    assert len(labels) > stored
+    # The probe samples the labelled steps only (one bin, all of them).
+    probe = replay_graded_probe(resumed.replay_buffer, get_policy_encoder(resumed.agent.actor),
+                                seed=0, label_key=COST_TO_GO, per_bin=len(labels))
+    assert probe.n_train + probe.n_test == len(labels) - stored
