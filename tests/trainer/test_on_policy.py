@@ -38,10 +38,11 @@ def test_each_collect_gets_ppo_epochs_passes_of_minibatches(tiny_config, tmp_pat
     assert len(rollout) == frames
     stored = set(rollout[:].keys(True, True))
     assert {"advantage", "value_target", "cost_advantage", "cost_value_target"} <= stored
-    # The labelled FIFO keeps the states and their safe/unsafe label only (what the contrastive
-    # sampler and the probe read), every collected frame while it has room.
+    # The labelled FIFO keeps the states, their safe/unsafe label and their cost-to-go only
+    # (what the contrastive sampler and the two probes read), every collected frame while it
+    # has room.
     labelled = set(trainer.replay_buffer[:].keys(True, True))
-    assert labelled == {"observation", ("next", "safe"), "index"}
+    assert labelled == {"observation", ("next", "safe"), ("next", "cost_to_go"), "index"}
     assert len(trainer.replay_buffer) == cfg.collector.total_frames
 
 

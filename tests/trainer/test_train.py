@@ -280,10 +280,11 @@ def test_buffer_stores_only_what_is_read_back(algo, n_step, tiny_config, tmp_pat
     trainer.run()
     stored = set(trainer.replay_buffer[:].keys(True, True))
     # The losses' inputs (n-step reward and discount exponent), the safe/unsafe label the
-    # sampler partitions on (the contrastive encoder reads the observation) ...
+    # sampler partitions on, the cost-to-go the graded probe reads (the contrastive encoder
+    # and the probes read the observation) ...
     needed = {
         "observation", "action", ("next", "observation"), ("next", "reward"), ("next", "done"),
-        ("next", "terminated"), ("next", "safe"),
+        ("next", "terminated"), ("next", "safe"), ("next", "cost_to_go"),
         "index",  # torchrl's TensorDict writer stores each transition's slot
     }
     if algo in ("s3rl", "ddpg_lag"):
