@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import torch
 from tensordict import TensorDictBase
 from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
 from torch import nn
 from torchrl.data import LazyTensorStorage, SamplerWithoutReplacement, TensorDictReplayBuffer
 from torchrl.data.tensor_specs import TensorSpec
@@ -448,6 +449,11 @@ def probe_label(algo: AlgoConfig) -> str:
     return graded_label(algo) or "cost_to_go"
 
 
+def probe_label_key(algo: AlgoConfig) -> NestedKey:
+    """Where the probed graded label is stored (:func:`probe_label`'s key)."""
+    return GRADED_LABEL_KEYS[probe_label(algo)]
+
+
 def probe_label_bins(algo: AlgoConfig) -> tuple[float, ...]:
     """The probe's bins: the graded sampler's strata (``contrastive_cfg.label_bins``, else the
     label's :data:`DEFAULT_LABEL_BINS`), so a binary run's probe balances the same bins as the
@@ -508,7 +514,7 @@ def _labelled_keys(
     keys = [
         replay_buffer.sampler.label_key,
         SAFE_LABEL_KEY,
-        GRADED_LABEL_KEYS[probe_label(algo)],
+        probe_label_key(algo),
         *get_policy_encoder(agent.actor).in_keys,
     ]
     phase = agent.contrastive
@@ -548,7 +554,7 @@ def build_updates(
     # copies: the transform keeps the last n frames of each copy until the next batch (paper:
     # n = 2).
     # Labels describe their own step: n-step keeps them at t (a graded one as the binary one).
-    keep = ["safe", GRADED_LABEL_KEYS[probe_label(algo)][-1]]
+    keep = ["safe", probe_label_key(algo)[-1]]
     nstep = (
         make_nstep_transform(algo.n_step, algo.gamma, keep_keys=tuple(keep))
         if algo.n_step > 1

@@ -45,7 +45,6 @@ from tqdm.auto import tqdm
 from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.builders import (
-    GRADED_LABEL_KEYS,
     SAFE_LABEL_KEY,
     Agent,
     build_agent,
@@ -53,8 +52,8 @@ from s3rl_torchrl.trainer.builders import (
     build_labeller,
     build_replay_buffer,
     build_updates,
-    probe_label,
     probe_label_bins,
+    probe_label_key,
     set_torch_threads,
 )
 from s3rl_torchrl.trainer.checkpoint import (
@@ -435,7 +434,7 @@ class Trainer:
             self.replay_buffer,
             get_policy_encoder(self.agent.actor),
             seed=self.cfg.seed * 1_000_003 + c.epochs,
-            label_key=GRADED_LABEL_KEYS[probe_label(self.cfg.algo)],
+            label_key=probe_label_key(self.cfg.algo),
             bin_edges=probe_label_bins(self.cfg.algo),
         )
         row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
@@ -554,7 +553,7 @@ class Trainer:
         leaves out, so the run resumes and new steps carry the label. Nothing else in the
         buffer changes."""
         storage = self.replay_buffer.storage
-        key = GRADED_LABEL_KEYS[probe_label(self.cfg.algo)]
+        key = probe_label_key(self.cfg.algo)
         if not storage.initialized or key in storage._storage.keys(include_nested=True):
             return
         like = storage._storage.get(SAFE_LABEL_KEY)

@@ -13,7 +13,7 @@ from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.diagnostics import replay_graded_probe
 from s3rl_torchrl.modules import build_s3rl_actor, get_policy_encoder
 from s3rl_torchrl.objectives import GradedInfoNCELoss, SafetyInfoNCELoss
-from s3rl_torchrl.trainer import ConfigError, Trainer, builders, loop, train, validate
+from s3rl_torchrl.trainer import ConfigError, Trainer, builders, train, validate
 from s3rl_torchrl.trainer.builders import build_contrastive_phase, build_replay_buffer
 
 COST_TO_GO = ("next", "cost_to_go")
@@ -158,8 +158,7 @@ def test_what_the_probe_measures_does_not_change_what_is_trained(
     # probed on the margin (no labeller; every step has it): equal training, probe aside.
     overrides = ("algo=s3rl", "task=SafetyPointGoal1-v0")
     train(tiny_config(*overrides), tmp_path / "cost_to_go")
-    for module in (builders, loop):
-        monkeypatch.setattr(module, "probe_label", lambda algo: "margin")
+    monkeypatch.setattr(builders, "probe_label", lambda algo: "margin")
     assert builders.build_labeller(tiny_config(*overrides).algo) is None
     train(tiny_config(*overrides), tmp_path / "margin")
     probed, other = _rows(tmp_path / "cost_to_go"), _rows(tmp_path / "margin")
