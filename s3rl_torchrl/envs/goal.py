@@ -54,6 +54,9 @@ GOAL_MAX_EPISODE_STEPS = 1000
 # The paper's Table 3 cost limit, which it uses for every task (Table 1 reports episode costs of
 # ~94-103 on this task for both algorithms, far above it).
 GOAL_COST_LIMIT = 10.0
+# The limit OmniSafe benchmarks the Goal tasks at (its off-policy and on-policy tables, 25 per
+# 1000-step episode); experiment=safe trains at it (TaskSpec.safe_cost_limit).
+GOAL_BENCHMARK_COST_LIMIT = 25.0
 
 # -- placement: where reset puts things ----------------------------------------------------
 # goal_level1.py: placements_conf.extents = [-1.5, -1.5, 1.5, 1.5] (min x, min y, max x, max y).
@@ -561,6 +564,7 @@ GOAL_TASKS: tuple[TaskSpec, ...] = tuple(
         source=_SOURCE,
         max_episode_steps=GOAL_MAX_EPISODE_STEPS,
         cost_limit=GOAL_COST_LIMIT,
+        benchmark_cost_limit=GOAL_BENCHMARK_COST_LIMIT,
         obs_dim=12 + LIDAR_NUM_BINS * len(LIDAR_OBJECTS),
         act_dim=2,
         cost_rule=_COST_RULE,

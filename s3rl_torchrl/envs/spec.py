@@ -29,7 +29,10 @@ class TaskSpec:
         family: ``"velocity"``, ``"bullet"``, ``"circle"`` or ``"goal"``.
         source: where the task comes from, e.g. ``"bullet-safety-gym 1.4.0"``.
         max_episode_steps: the time limit (Gymnasium's ``TimeLimit``) of one episode.
-        cost_limit: the default per-episode cost limit ``d`` (``task.cost_limit``).
+        cost_limit: the default per-episode cost limit ``d`` (``task.cost_limit``): the paper's.
+        benchmark_cost_limit: the limit the peers benchmark the task at, where it differs from
+            ``cost_limit`` (OmniSafe's 25 for the Safety-Gymnasium Goal tasks); the limit
+            ``experiment=safe`` trains at (:attr:`safe_cost_limit`). ``None``: ``cost_limit``.
         obs_dim: observation size.
         act_dim: action size.
         cost_rule: the per-step cost in one line, e.g. ``"1 if vx > 3.2096"``.
@@ -57,6 +60,7 @@ class TaskSpec:
     act_dim: int
     cost_rule: str
     margin_rule: str | None = None
+    benchmark_cost_limit: float | None = None
     extra: str | None = None
     registered_as: str | None = None
     requires_module: str | None = None
@@ -69,6 +73,12 @@ class TaskSpec:
                 f"TaskSpec({self.env_id!r}).family is {self.family!r}; "
                 f"valid families are {', '.join(FAMILIES)}."
             )
+
+    @property
+    def safe_cost_limit(self) -> float:
+        """The per-episode limit ``experiment=safe`` trains at: the peers' benchmark limit where
+        the task has one, else the paper's ``cost_limit``."""
+        return self.cost_limit if self.benchmark_cost_limit is None else self.benchmark_cost_limit
 
     @property
     def gym_id(self) -> str:

@@ -13,6 +13,18 @@ with ``r^(n)``, ``c^(n)``, ``s'`` and ``k = steps_to_next_obs`` from
 1). The entropy term in ``y_i`` is the ``entropy_in_cost_target`` switch (FSRL and the paper: on).
 ``a'`` is one sample shared by all targets and ``a`` one reparameterised sample shared by the
 reward and cost terms of the actor loss.
+
+The formulas above are FSRL's (the defaults). Three switches make the cost critic sound under a
+large multiplier (docs/objectives.md, "Sound critics"); each replaces one piece:
+
+- ``cost_critic_read``: how the cost pair is read in ``y_i`` and ``L_pi``: ``"min"`` (FSRL; an
+  optimistic read for a cost the actor minimises), ``"max"`` (pessimistic, as CAL's upper
+  confidence bound of its cost ensemble) or ``"mean"``;
+- ``cost_nonnegative``: the cost critic's bootstrap value and its read in ``L_pi`` are clamped at
+  0 (every cost is >= 0, so is every cost value);
+- ``entropy_rescaling=False``: only the reward and cost terms are divided by ``1 + sum lambda``,
+  ``L_pi = mean(alpha log pi) + mean(sum_i lambda_i Q_i - Q_0) / (1 + sum_i lambda_i)``, so that
+  automatic alpha does not have to grow with lambda to hold its target entropy.
 """
 
 from __future__ import annotations
@@ -45,6 +57,11 @@ __all__ = ["SACLagLoss", "SACLagOptimizers", "make_sac_lag_optimizers", "sac_lag
 
 _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
 _CRITIC_EVAL_CHOICES = ("auto", "batched_mlp", "fused_vmap", "vmap")
+#: How a cost critic pair (or ensemble) is read into one value: FSRL's optimistic ``min``, the
+#: pessimistic ``max`` (CAL's reading of a cost ensemble through an upper bound), or the ``mean``.
+COST_CRITIC_READS = ("min", "max", "mean")
+
+
 def _detached(params: TensorDictBase) -> TensorDictBase:
     """``params.detach()`` (SACLoss's) without locking the copy: ``detach()`` of locked
     ``TensorDictParams`` locks its result, and tensordict warns about a ``lock_()`` inside a
@@ -96,6 +113,12 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         entropy_in_cost_target: subtract ``alpha log pi(a'|s')`` in the cost targets (FSRL and
             the paper: ``True``; OmniSafe: ``False``).
         rescaling: divide the whole actor loss by ``1 + sum(lagrangian)`` (FSRL/paper: ``True``).
+        entropy_rescaling: with ``rescaling``, divide the entropy term too (FSRL: ``True``);
+            ``False`` divides only the reward and cost terms, so alpha does not grow with lambda.
+        cost_critic_read: ``"min"`` (FSRL), ``"max"`` or ``"mean"`` of the cost critics, in the
+            cost targets and in the actor loss (module docstring).
+        cost_nonnegative: clamp the cost critics' bootstrap value and their read in the actor
+            loss at 0 (FSRL: ``False``).
         lagrangian_init: initial ``lagrangian`` (float or ``m`` values, >= 0).
         critic_eval: how the critics are evaluated (same numbers up to float rounding, speed
             differs, see ``docs/objectives.md``): ``"batched_mlp"`` runs every reward and cost
@@ -162,6 +185,9 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         delay_qvalue: bool = True,
         entropy_in_cost_target: bool = True,
         rescaling: bool = True,
+        entropy_rescaling: bool = True,
+        cost_critic_read: Literal["min", "max", "mean"] = "min",
+        cost_nonnegative: bool = False,
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
         critic_eval: Literal["auto", "batched_mlp", "fused_vmap", "vmap"] = "auto",
         separate_losses: bool = False,
@@ -191,6 +217,11 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             raise ValueError(
                 f"Unknown loss_function {loss_function!r}; valid choices are "
                 f"{', '.join(_LOSS_FUNCTIONS)}."
+            )
+        if cost_critic_read not in COST_CRITIC_READS:
+            raise ValueError(
+                f"Unknown cost_critic_read {cost_critic_read!r}; valid choices are "
+                f"{', '.join(map(repr, COST_CRITIC_READS))}."
             )
         if critic_eval not in _CRITIC_EVAL_CHOICES:
             raise ValueError(
@@ -239,6 +270,9 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         self.num_costs = num_costs
         self.entropy_in_cost_target = bool(entropy_in_cost_target)
         self.rescaling = bool(rescaling)
+        self.entropy_rescaling = bool(entropy_rescaling)
+        self.cost_critic_read = cost_critic_read
+        self.cost_nonnegative = bool(cost_nonnegative)
         self._init_lagrangian(lagrangian_init, device=self.log_alpha.device)
 
         if num_costs > 0:
@@ -475,7 +509,9 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             if q_cost is not None:
                 if self.entropy_in_cost_target:
                     q_cost = q_cost - entropy_term
-                next_cost_value = q_cost.min(1)[0].movedim(0, -1)
+                next_cost_value = self.read_cost(q_cost).movedim(0, -1)
+                if self.cost_nonnegative:
+                    next_cost_value = next_cost_value.clamp_min(0.0)
                 next_value = torch.cat([next_value, next_cost_value], -1)
                 rewards = torch.cat([rewards, cost.to(rewards.dtype)], -1)
             target = self._td0(tensordict, rewards, next_value)
@@ -602,20 +638,90 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
                 f"Actor log-prob and Q-value shapes differ: {log_prob.shape} and "
                 f"{min_q_reward.shape}."
             )
-        loss_actor = self._alpha * log_prob - min_q_reward
+        terms = self._actor_terms(log_prob, min_q_reward, q_cost)
         metadata = {"log_prob": log_prob.detach(), "reward_q": min_q_reward.detach().mean()}
-        lagrangian = self.lagrangian
         if q_cost is not None:
-            min_q_cost = q_cost.min(1)[0]  # [m, *B]
-            lag = lagrangian.reshape(-1, *([1] * (min_q_cost.ndim - 1)))
-            loss_actor = loss_actor + (lag * min_q_cost).sum(0)
-            metadata["cost_q"] = min_q_cost.detach().flatten(1).mean(1)
-            if self.rescaling:
-                loss_actor = loss_actor / (1.0 + lagrangian.sum())
+            metadata["cost_q"] = terms.pop("cost_q").detach().flatten(1).mean(1)
         else:
             metadata["cost_q"] = min_q_reward.new_zeros(0)
-        loss_actor = self._reduce_loss(loss_actor, tensordict=tensordict, weights=weights)
+        loss_actor = self._reduce_loss(terms["total"], tensordict=tensordict, weights=weights)
         return loss_actor, metadata
+
+    def _actor_terms(
+        self, log_prob: Tensor, min_q_reward: Tensor, q_cost: Tensor | None, detail: bool = False
+    ) -> dict[str, Tensor]:
+        """The actor loss per sample (``total``) and the cost critics' read ``cost_q``
+        (``[m, *B]``); with ``detail``, also the loss's three terms as they enter it:
+        ``entropy`` (``alpha log pi``), ``reward`` (``-Q_0``) and ``cost`` (``sum_i lambda_i
+        Q_i``), each divided by ``1 + sum lambda`` where the loss divides it."""
+        entropy = self._alpha * log_prob
+        loss_actor = entropy - min_q_reward
+        out = {"entropy": entropy, "reward": -min_q_reward} if detail else {}
+        if q_cost is None:
+            out["total"] = loss_actor
+            return out
+        lagrangian = self.lagrangian
+        read_q_cost = self.read_cost(q_cost)  # [m, *B]
+        if self.cost_nonnegative:
+            read_q_cost = read_q_cost.clamp_min(0.0)
+        lag = lagrangian.reshape(-1, *([1] * (read_q_cost.ndim - 1)))
+        penalty = (lag * read_q_cost).sum(0)
+        out["cost_q"] = read_q_cost
+        if not self.rescaling:
+            out["total"] = loss_actor + penalty
+        elif self.entropy_rescaling:  # FSRL: the whole loss, entropy included
+            out["total"] = (loss_actor + penalty) / (1.0 + lagrangian.sum())
+        else:
+            out["total"] = entropy + (penalty - min_q_reward) / (1.0 + lagrangian.sum())
+        if detail:
+            out["cost"] = penalty
+            if self.rescaling:
+                scale = 1.0 + lagrangian.sum()
+                out["reward"], out["cost"] = -min_q_reward / scale, penalty / scale
+                if self.entropy_rescaling:
+                    out["entropy"] = entropy / scale
+        return out
+
+    def read_cost(self, q_cost: Tensor) -> Tensor:
+        """The cost critics ``[m, N, *B]`` read into one value per cost ``[m, *B]``
+        (``cost_critic_read``)."""
+        if self.cost_critic_read == "min":
+            return q_cost.min(1)[0]
+        if self.cost_critic_read == "max":
+            return q_cost.max(1)[0]
+        return q_cost.mean(1)
+
+    def actor_loss_terms(self, tensordict: TensorDictBase) -> dict[str, Tensor]:
+        """The actor loss's terms, batch means, with gradients (diagnostics: which term drives
+        the policy): ``entropy``, ``reward`` and ``cost`` as :meth:`_actor_terms` defines
+        them; their sum is ``actor_loss`` for the same random draw. Eager only."""
+        with (
+            set_exploration_type(ExplorationType.RANDOM),
+            self.actor_network_params.to_module(self.actor_network, preserve_module_state=False),
+        ):
+            dist = self.actor_network.get_dist(tensordict)
+            action, log_prob = compute_rsample_log_prob(dist)
+        td_q = self._critic_input(tensordict)
+        td_q.set(self.tensor_keys.action, action)
+        q_reward, q_cost = self._critics(
+            td_q,
+            self._cached_detached_qvalue_params,
+            self._cached_detached_cost_qvalue_params if self.num_costs else None,
+        )
+        terms = self._actor_terms(log_prob, q_reward.min(0)[0], q_cost, detail=True)
+        terms.pop("cost_q", None)
+        terms.pop("total")
+        return {name: term.mean() for name, term in terms.items()}
+
+    @torch.no_grad()
+    def critic_values(self, tensordict: TensorDictBase) -> tuple[Tensor, Tensor | None]:
+        """The current (not target) critics at ``(observation, action)`` of ``tensordict``:
+        reward ``[N, *B]`` and cost ``[m, N, *B]`` (``None`` without cost critics)."""
+        return self._critics(
+            self._critic_input(tensordict),
+            self.qvalue_network_params,
+            self.cost_qvalue_network_params if self.num_costs else None,
+        )
 
     @dispatch
     def forward(self, tensordict: TensorDictBase) -> TensorDictBase:

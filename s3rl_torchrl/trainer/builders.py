@@ -160,7 +160,10 @@ def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianControlle
         )
     if algo.lagrangian == "learned":
         return LearnedLagrangian(
-            cost_limit, lr=algo.lagrangian_lr, lagrangian_init=algo.lagrangian_init
+            cost_limit,
+            lr=algo.lagrangian_lr,
+            lagrangian_init=algo.lagrangian_init,
+            upper_bound=algo.lagrangian_max,
         )
     return None
 
@@ -226,6 +229,9 @@ def build_sac_agent(algo: AlgoConfig, nets: Networks, compile_fn: CompileFn | No
         action_spec=nets.action_spec,
         entropy_in_cost_target=algo.cost_entropy,
         rescaling=algo.rescaling,
+        entropy_rescaling=algo.entropy_rescaling,
+        cost_critic_read=algo.cost_critic_read,
+        cost_nonnegative=algo.cost_nonnegative,
         lagrangian_init=algo.lagrangian_init if constrained else 0.0,
     )
     loss.make_value_estimator(gamma=algo.gamma)

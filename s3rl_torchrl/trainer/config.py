@@ -19,6 +19,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
 from s3rl_torchrl.objectives.graded_infonce import GRADED_POSITIVES
 from s3rl_torchrl.objectives.lagrangian import LAGRANGIAN_CADENCES
+from s3rl_torchrl.objectives.sac_lag import COST_CRITIC_READS
 from s3rl_torchrl.trainer.builders import FAMILIES
 from s3rl_torchrl.trainer.schedule import UpdateSchedule, collector_batch_frames
 
@@ -230,8 +231,19 @@ class AlgoConfig:
     lagrangian_cadence: str = "collect"
     lagrangian_window: int = 10  # episodes (cadence=step; OmniSafe's window_lens)
     lagrangian_warmup_frames: int = 0  # lambda stays at lagrangian_init until past these frames
+    # Upper bound of the learned multiplier (OmniSafe's lagrangian_upper_bound); None: none.
+    # The PID controller has its own (pid.penalty_max).
+    lagrangian_max: float | None = None
     rescaling: bool = True
     cost_entropy: bool = True  # subtract alpha*log_pi in the cost targets (FSRL, paper)
+    # SAC family, the cost critics under the Lagrangian (objectives/sac_lag.py, docs/objectives.md
+    # "Sound critics"); the defaults are FSRL's (experiment=paper), configs/critic/ names sets.
+    # How the pair is read in the cost targets and the actor loss: min (FSRL), max or mean.
+    cost_critic_read: str = "min"
+    cost_nonnegative: bool = False  # clamp the cost value at 0 in its target and actor read
+    # With rescaling: divide the entropy term by 1 + lambda too (FSRL); false keeps alpha's
+    # term out of the rescaling, so auto alpha does not grow with lambda.
+    entropy_rescaling: bool = True
     gamma: float = 0.99
     tau: float = 0.05
     n_step: int = 2
@@ -283,6 +295,16 @@ class AlgoConfig:
         _check_choice(f"{path}.lagrangian_cadence", self.lagrangian_cadence, LAGRANGIAN_CADENCES)
         _check_range(f"{path}.lagrangian_window", self.lagrangian_window, 1)
         _check_range(f"{path}.lagrangian_warmup_frames", self.lagrangian_warmup_frames, 0)
+        if self.lagrangian_max is not None:
+            _check_range(f"{path}.lagrangian_max", self.lagrangian_max, 0.0, low_inclusive=False)
+            if self.lagrangian != "learned":
+                _fail(
+                    f"{path}.lagrangian_max",
+                    self.lagrangian_max,
+                    f"bounds the learned multiplier only (algo.lagrangian={self.lagrangian!r}); "
+                    "the PID's bound is algo.pid.penalty_max",
+                )
+        _check_choice(f"{path}.cost_critic_read", self.cost_critic_read, COST_CRITIC_READS)
         _check_range(f"{path}.gamma", self.gamma, 0.0, 1.0)
         _check_range(f"{path}.tau", self.tau, 0.0, 1.0, low_inclusive=False)
         _check_range(f"{path}.n_step", self.n_step, 1)
@@ -543,6 +565,14 @@ def lagrangian_for(algo_name: str, controller: str) -> str:
     return "none" if algo_name in UNCONSTRAINED_ALGOS else controller
 
 
+def safe_cost_limit(task_name: str) -> float:
+    """The limit ``experiment=safe`` trains a task at (``TaskSpec.safe_cost_limit``: the peers'
+    benchmark limit where the registry has one, e.g. 25 for SafetyPointGoal1, else the paper's
+    10); ``${s3rl_safe_cost_limit:${task.name}}``. A ``task.cost_limit=`` override still wins."""
+    _check_choice("task.name", task_name, tuple(task_names()))
+    return float(get_task(task_name).safe_cost_limit)
+
+
 def round_up(value: int, multiple: int) -> int:
     """``value`` rounded up to a multiple of ``multiple``: FSRL's epoch runs whole collects until
     ``step_per_epoch`` frames are reached (``${s3rl_round_up:10000,${collector.frames_per_batch}}``)."""
@@ -553,11 +583,13 @@ def register_configs() -> None:
     """Store the schemas (and one ``task`` option per registered task) in Hydra's ConfigStore,
     and the resolvers the YAMLs use: ``s3rl_run_name`` (default output directories),
     ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs),
-    ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only)."""
+    ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only),
+    ``s3rl_safe_cost_limit`` (``experiment=safe``'s per-task limit)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
     OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)
     OmegaConf.register_new_resolver("s3rl_round_up", round_up, replace=True)
     OmegaConf.register_new_resolver("s3rl_lagrangian", lagrangian_for, replace=True)
+    OmegaConf.register_new_resolver("s3rl_safe_cost_limit", safe_cost_limit, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(name="eval_schema", node=EvalRunConfig)

@@ -42,6 +42,11 @@ from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from tqdm.auto import tqdm
 
+from s3rl_torchrl.diagnostics.critics import (
+    RecentEpisodes,
+    actor_gradient_norms,
+    critic_calibration,
+)
 from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.builders import (
@@ -103,6 +108,8 @@ RESUME_LOCKED = [
     "collector.frames_per_epoch",
 ]
 BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
+# Finished training episodes the critic calibration reads each epoch (diagnostics/critics.py).
+CALIBRATION_EPISODES = 10
 
 
 @dataclass
@@ -221,6 +228,13 @@ class Trainer:
         # What the algorithm's update schedule stores and samples (trainer/schedule.py).
         self.updates = build_updates(cfg, self.agent, self.replay_buffer)
         self.schedule = self.updates.schedule
+        # The SAC family's critics are held against the returns of the last finished training
+        # episodes at every epoch's end (diagnostics/critics.py).
+        self.recent_episodes = (
+            RecentEpisodes(CALIBRATION_EPISODES)
+            if hasattr(self.agent.loss, "actor_loss_terms")
+            else None
+        )
         self.counters = Counters()
         self.best = BestFeasible()
         if checkpoint is not None:
@@ -312,6 +326,8 @@ class Trainer:
         )
 
     def _store(self, batch: TensorDictBase) -> None:
+        if self.recent_episodes is not None:
+            self.recent_episodes.extend(batch)
         if self.labeller is not None:
             batch = self.labeller(batch)
         self.updates.store(batch)
@@ -438,6 +454,24 @@ class Trainer:
             bin_edges=probe_label_bins(self.cfg.algo),
         )
         row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
+        row.update(self._critic_diagnostics())
+        return row
+
+    def _critic_diagnostics(self) -> dict[str, float]:
+        """The SAC family's critics against the returns of the last finished training episodes,
+        and the actor's gradient norm per loss term on one replay batch of 256 (drawn with its
+        own seed and random stream, so training's streams are untouched)."""
+        if self.recent_episodes is None:
+            return {}
+        loss = self.agent.loss
+        row = critic_calibration(loss, list(self.recent_episodes.episodes), self.cfg.algo.gamma)
+        storage = self.replay_buffer.storage
+        if len(storage) == 0:
+            return {**row, "grad/entropy": math.nan, "grad/reward": math.nan, "grad/cost": math.nan}
+        with torch.random.fork_rng():
+            torch.manual_seed(self.cfg.seed * 1_000_003 + self.counters.epochs)
+            index = torch.randint(len(storage), (256,))
+            row.update(actor_gradient_norms(loss, storage[index]))
         return row
 
     def _progress_postfix(self) -> dict[str, str]:
@@ -511,6 +545,9 @@ class Trainer:
             else None,
             "rng": capture_rng_state(),
             "best_feasible": asdict(self.best),
+            "recent_episodes": self.recent_episodes.state_dict()
+            if self.recent_episodes is not None
+            else None,
         }
 
     def _save_best(self) -> Path:
@@ -545,6 +582,8 @@ class Trainer:
         self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         self.best = BestFeasible(**state.get("best_feasible", {}))
+        if self.recent_episodes is not None and state.get("recent_episodes") is not None:
+            self.recent_episodes.load_state_dict(state["recent_episodes"])
         restore_rng_state(state["rng"])
 
     def _label_unlabelled_steps(self) -> None:
