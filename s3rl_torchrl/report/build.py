@@ -11,6 +11,7 @@ from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
 from s3rl_torchrl.report.runs import (
     PROTOCOLS,
     RUN_SPECIFIC_KEYS,
+    ReportError,
     Run,
     RunGroup,
     config_differences,
@@ -352,6 +353,9 @@ def build_report(
     embedding_episodes: int = 2,
     tsne_states: int = 1000,
     command: str | None = None,
+    aggregate: bool | None = None,
+    aggregate_reps: int = 2000,
+    aggregate_seed: int = 0,
 ) -> Report:
     """Find the runs below ``root``, write ``<out>/report.md`` and its figures (PNG and SVG).
 
@@ -367,6 +371,11 @@ def build_report(
         embedding_episodes: evaluation env copies rolled out per checkpoint.
         tsne_states: at most this many states per t-SNE panel.
         command: the command line shown in the report.
+        aggregate: the aggregate over tasks (``report.aggregate``, rliable): True: required
+            (a ReportError without rliable), False: left out, None: included when rliable
+            imports, else the section says what to install.
+        aggregate_reps: bootstrap resamples of each aggregate estimate.
+        aggregate_seed: the seed of the aggregate's bootstrap (same seed, same intervals).
     """
     from s3rl_torchrl.report import figures
 
@@ -447,6 +456,17 @@ def build_report(
         *_paper_comparison(by_task),
         "",
     ]
+
+    if aggregate is not False:
+        from s3rl_torchrl.report.aggregate import aggregate_section, rliable_problem
+
+        if aggregate and rliable_problem() is not None:
+            raise ReportError(f"--aggregate: {rliable_problem()}")
+        section, files, notes = aggregate_section(groups, out, reference, pairs,
+                                                  aggregate_reps, aggregate_seed)
+        lines += section
+        report.figures += files
+        report.notes += notes
 
     report.figures += figures.learning_curves(by_task, out, reference)
     lines += [

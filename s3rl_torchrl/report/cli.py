@@ -17,6 +17,13 @@ def _positive(text: str) -> int:
     return value
 
 
+def _non_negative(text: str) -> int:
+    value = int(text)
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"must be an integer in [0, 2**32), got {text}")
+    return value
+
+
 def _pair(text: str) -> tuple[str, str]:
     first, sep, second = text.partition(":")
     if not sep or not first or not second:
@@ -30,7 +37,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         description=(
             "Find every run (a directory with config.json and metrics.csv) below RUNS, group "
             "them by task and algo, and write report.md with Table 1, the S3RL-vs-baseline "
-            "tests, the paper's numbers and Figures 2-4 (PNG and SVG)."
+            "tests, the paper's numbers, the aggregate over tasks (rliable) and Figures 2-4 "
+            "(PNG and SVG)."
         ),
     )
     parser.add_argument("runs", help="a run, a Hydra multirun/sweep dir or an outputs dir")
@@ -55,6 +63,18 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--tsne-states", type=_positive, default=1000,
                         help="at most this many states per t-SNE panel (default: 1000; "
                              "t-SNE time grows faster than linearly)")
+    parser.add_argument("--aggregate", action=argparse.BooleanOptionalAction, default=None,
+                        help="the aggregate over tasks and seeds (rliable: interquartile means, "
+                             "probability of improvement, share within the limit, performance "
+                             "profiles, with stratified-bootstrap intervals); default: included "
+                             "when rliable is installed (pip install \"s3rl-torchrl[report]\"), "
+                             "else the report says so; --aggregate: required; --no-aggregate: "
+                             "left out")
+    parser.add_argument("--aggregate-reps", type=_positive, default=2000,
+                        help="bootstrap resamples per aggregate estimate (default: 2000)")
+    parser.add_argument("--aggregate-seed", type=_non_negative, default=0,
+                        help="seed of the aggregate's bootstrap (default: 0; the same seed "
+                             "rebuilds the same intervals)")
     parser.add_argument("--export-runs", default=None, metavar="DEST",
                         help="copy config.json, metrics.csv and final_eval.json of every run "
                              "to DEST (same layout; no checkpoints; copies of runs gone from "
@@ -94,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             embedding_episodes=args.embedding_episodes,
             tsne_states=args.tsne_states,
             command=shlex.join(["s3rl-report", *argv]),
+            aggregate=args.aggregate,
+            aggregate_reps=args.aggregate_reps,
+            aggregate_seed=args.aggregate_seed,
         )
     except ReportError as err:
         print(f"s3rl-report: error: {err}", file=sys.stderr)
