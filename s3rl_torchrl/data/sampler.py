@@ -39,6 +39,14 @@ ANCHOR, POSITIVE, NEGATIVE = 0, 1, 2
 UNSAFE, SAFE = 0, 1
 _EMPTY_SLOT = -1
 _STRATUM_NAMES = {SAFE: "safe", UNSAFE: "unsafe"}
+# How a collector's [num_envs, time] batch goes into a 1-D buffer (the errors below say it).
+_STORE_FLAT = (
+    "With an n-step transform in the buffer (make_nstep_transform), extend with the "
+    "collector's unflattened [num_envs, time] batch, `rb.extend(data)`: the transform builds "
+    "each env's windows along time, then flattens (a flattened batch would join different "
+    "envs' steps into one window). Without one, flatten it first: "
+    "`rb.extend(data.reshape(-1))`."
+)
 
 
 class StratumTooSmallError(RuntimeError):
@@ -221,6 +229,11 @@ class SafeUnsafeSampler(Sampler):
     :class:`~torchrl.data.LazyTensorStorage` or :class:`~torchrl.data.LazyMemmapStorage`.
     It keeps the safe/unsafe partition of the stored slots up to date on every write (reading the
     label only at the written indices), so sampling is O(batch) whatever the buffer size.
+
+    Each slot holds one transition. A collector's ``[num_envs, time]`` batch goes in
+    unflattened when the buffer has an n-step transform
+    (:func:`~s3rl_torchrl.objectives.make_nstep_transform`, which builds each env's windows
+    along time and then flattens), and flattened (``data.reshape(-1)``) when it has none.
 
     Modes:
 
@@ -413,8 +426,8 @@ class SafeUnsafeSampler(Sampler):
             )
         if storage.ndim != 1:
             raise ValueError(
-                f"SafeUnsafeSampler needs a 1-D storage (got ndim={storage.ndim}); flatten the "
-                "env batch before extending, e.g. `rb.extend(data.reshape(-1))`."
+                f"SafeUnsafeSampler needs a 1-D storage, one transition per slot (got "
+                f"ndim={storage.ndim}): build it with the default ndim=1. {_STORE_FLAT}"
             )
 
     def _ensure_partition(self, storage: Storage) -> None:
@@ -459,8 +472,7 @@ class SafeUnsafeSampler(Sampler):
             raise ValueError(
                 f"SafeUnsafeSampler: each storage slot must hold one transition with one label, "
                 f"but a slot's {self.label_key!r} has {label.shape[-1]} entries (stored shape "
-                f"{tuple(stored.get(self.label_key).shape)}). Flatten batched collector output "
-                "before extending: `rb.extend(data.reshape(-1))`."
+                f"{tuple(stored.get(self.label_key).shape)}). {_STORE_FLAT}"
             )
         label = label[:, 0].cpu()
         if self.graded and bool(torch.isnan(label).any()):

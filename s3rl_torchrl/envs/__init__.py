@@ -15,7 +15,8 @@ from s3rl_torchrl.envs.registry import (
     get_task,
     task_names,
 )
-from s3rl_torchrl.envs.spec import TaskSpec
+from s3rl_torchrl.envs.spec import SafeSettings, TaskSpec
+from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, restore_env
 from s3rl_torchrl.envs.velocity import register_velocity_tasks, velocity_cost
 
 # Gymnasium registration, one call per family (none imports an optional package).
@@ -34,7 +35,11 @@ __all__ = [
     "VELOCITY_SPECS",
     "VELOCITY_TASKS",
     "RegisteredTask",
+    "SafeSettings",
     "TaskSpec",
+    "env_snapshot",
+    "exact_restore_unsupported",
+    "restore_env",
     "VelocityTask",
     "get_task",
     "make_base_env",

@@ -26,6 +26,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import mujoco
 import numpy as np
+import torch
 from gymnasium.envs.mujoco import MujocoEnv
 from gymnasium.utils import EzPickle
 
@@ -47,6 +48,7 @@ from s3rl_torchrl.envs.layout import (
     layout_from_options,
 )
 from s3rl_torchrl.envs.spec import TaskSpec
+from s3rl_torchrl.envs.state import generator_state, set_generator_state
 
 # bases/base_task.py: BaseTask.num_steps = 1000; safety_gymnasium/__init__.py registers every Goal
 # id with max_episode_steps=1000.
@@ -458,6 +460,44 @@ class PointGoalEnv(MujocoEnv, EzPickle):
              "vases": self._vases_xy()},
         )
         return np.concatenate([*(sensordata[s] for s in self._sensors), lidars])
+
+    # -- exact snapshots (envs/state.py) ------------------------------------------------------
+    def snapshot_extra(self) -> dict[str, Any]:
+        """What the next steps read besides MjData and ``np_random``: the model fields a layout
+        and a new goal move, the layout generator, the last goal distance, the start layout."""
+        model = self.model
+        start = self._start_layout
+        return {
+            "body_pos": torch.from_numpy(model.body_pos.copy()),
+            "body_quat": torch.from_numpy(model.body_quat.copy()),
+            "qpos0": torch.from_numpy(model.qpos0.copy()),
+            "rng": None if self._rng is None else generator_state(self._rng),
+            "last_dist_goal": float(self._last_dist_goal),
+            "start_layout": None
+            if start is None
+            else [
+                torch.from_numpy(np.asarray(getattr(start, name), dtype=np.float64))
+                for name in ("agent", "goal", "hazards", "vases")
+            ],
+        }
+
+    def restore_extra(self, state: dict[str, Any]) -> None:
+        model = self.model
+        model.body_pos[:] = state["body_pos"].numpy()
+        model.body_quat[:] = state["body_quat"].numpy()
+        model.qpos0[:] = state["qpos0"].numpy()
+        # The constants the compiler derives from the initial pose, as _apply_layout does; the
+        # data it uses as scratch is overwritten by the snapshot's MjData afterwards.
+        mujoco.mj_setConst(model, self.data)
+        if state["rng"] is None:
+            self._rng = None
+        else:
+            self._rng = np.random.RandomState()
+            set_generator_state(self._rng, state["rng"])
+        self._last_dist_goal = state["last_dist_goal"]
+        start = state["start_layout"]
+        self._start_layout = None if start is None else GoalLayout(*(t.numpy() for t in start))
+        self._layout = None
 
     # -- Gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

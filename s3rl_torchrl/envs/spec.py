@@ -21,6 +21,23 @@ EXTRA_INSTALL: dict[str, str] = {
 
 
 @dataclass(frozen=True)
+class SafeSettings:
+    """What the recommended preset (``experiment=safe``) sets for one task where its defaults do
+    not fit, as OmniSafe keeps per-environment overrides of its algorithms' configs. ``None``
+    keeps the preset's value (configs/experiment/safe.yaml); the reasons are in
+    docs/results.md ("Safe agents beyond the velocity tasks").
+
+    Attributes:
+        lagrangian_lr: the multiplier's Adam rate per gradient step (``algo.lagrangian_lr``).
+        lagrangian_warmup_frames: frames before lambda first moves
+            (``algo.lagrangian_warmup_frames``).
+    """
+
+    lagrangian_lr: float | None = None
+    lagrangian_warmup_frames: int | None = None
+
+
+@dataclass(frozen=True)
 class TaskSpec:
     """One task id of the registry: the facts the trainer, the docs and the tests read.
 
@@ -33,6 +50,7 @@ class TaskSpec:
         benchmark_cost_limit: the limit the peers benchmark the task at, where it differs from
             ``cost_limit`` (OmniSafe's 25 for the Safety-Gymnasium Goal tasks); the limit
             ``experiment=safe`` trains at (:attr:`safe_cost_limit`). ``None``: ``cost_limit``.
+        safe: the task's own values of the recommended preset (:class:`SafeSettings`).
         obs_dim: observation size.
         act_dim: action size.
         cost_rule: the per-step cost in one line, e.g. ``"1 if vx > 3.2096"``.
@@ -61,6 +79,7 @@ class TaskSpec:
     cost_rule: str
     margin_rule: str | None = None
     benchmark_cost_limit: float | None = None
+    safe: SafeSettings = SafeSettings()
     extra: str | None = None
     registered_as: str | None = None
     requires_module: str | None = None

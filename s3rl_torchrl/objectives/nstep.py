@@ -184,7 +184,13 @@ class NStepTransform(MultiStepTransform):
     def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase | None:
         if not self._validated:
             self._validate()
+        if tensordict.ndim < 1:
+            raise ValueError(
+                "NStepTransform needs a time dimension (a collector's batch, [num_envs, time] "
+                f"or [time]); got batch size {tuple(tensordict.batch_size)}."
+            )
         total = self._append_tensordict(tensordict)
+        _check_consecutive(total)
         if total.shape[-1] <= self.n_steps:
             return None
         out = nstep_transition(
@@ -198,6 +204,41 @@ class NStepTransform(MultiStepTransform):
         )
         out = out[..., : -self.n_steps]
         return out.reshape(-1) if self.flatten else out
+
+
+    @property
+    def held_frames(self) -> TensorDictBase | None:
+        """The last ``n_steps`` frames of each env copy, held back until the next batch (the
+        windows of their steps end in it); ``None`` before the first batch. A checkpoint keeps
+        them, so that a resumed run stores the same transitions as an uninterrupted one."""
+        return self._buffer
+
+    def load_held_frames(self, frames: TensorDictBase | None) -> None:
+        """Restore :attr:`held_frames` (from a checkpoint)."""
+        self._buffer = None if frames is None else frames.clone()
+
+
+def _check_consecutive(frames: TensorDictBase) -> None:
+    """Refuse frames whose time dimension is not one env copy's consecutive steps, e.g. a
+    flattened ``[num_envs * time]`` batch, whose windows would silently cross copies.
+
+    Read from the root ``step_count`` (torchrl's ``StepCounter``, which ``make_env`` adds):
+    within an episode it grows by one per step; after a step whose ``("next", "done")`` is set
+    it restarts. Frames without a ``step_count`` are not checked."""
+    steps = frames.get("step_count", None)
+    done = frames.get(("next", "done"), None)
+    if steps is None or done is None or frames.shape[-1] < 2:
+        return
+    steps = steps.reshape(frames.shape)
+    done = done.reshape(frames.shape)
+    broken = (steps[..., 1:] != steps[..., :-1] + 1) & ~done[..., :-1]
+    if broken.any():
+        raise ValueError(
+            "NStepTransform: the time dimension (the last batch dimension) does not hold "
+            "consecutive steps of one env copy (step_count jumps without an episode end), so "
+            "n-step windows would mix copies. Extend the buffer with the collector's batch as "
+            "it comes, [num_envs, time] unflattened: the transform flattens its output itself."
+        )
 
 
 def make_nstep_transform(

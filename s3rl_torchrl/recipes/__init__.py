@@ -3,12 +3,21 @@
 Their configs are the YAML files of the repository's top-level ``configs/``: a wheel ships that
 directory inside the package as ``s3rl_torchrl/configs/`` (``pyproject.toml`` maps it), a source
 checkout (editable install) reads it in place. :func:`config_dir` finds whichever is there.
+
+Both recipes share two helpers around Hydra's output directory: :class:`HydraOutput` takes back
+the directory Hydra made for a rejected command, and :func:`console_to_log` copies what a
+command prints into Hydra's job log (``train.log``, ``evaluate.log``).
 """
 
 from __future__ import annotations
 
+import logging
 import sys
+import time
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 CONFIG_NAMES = ("train.yaml", "evaluate.yaml")
@@ -55,3 +64,145 @@ def quiet_known_warnings() -> None:
             print(f"WARNING: {message}", file=sys.stderr)
 
     mujoco.set_mju_user_warning(on_mujoco_warning)
+
+
+# -------------------------------------------------------------------- Hydra's output directory
+# When this process started to run the recipe (the recipe module imports this one before
+# Hydra creates any directory): files modified since were written by this invocation. File
+# timestamps come from a coarser clock than time.time(), hence the slack.
+STARTED = time.time()
+_TIMESTAMP_SLACK = 2.0
+# What Hydra writes into a job's output directory before the task function runs: the job's
+# log (train.log, evaluate.log) and these files in `hydra.output_subdir` (.hydra/).
+HYDRA_CONFIG_FILES = frozenset({"config.yaml", "hydra.yaml", "overrides.yaml"})
+
+
+def _written_by_this_invocation(path: Path) -> bool:
+    return path.is_file() and path.stat().st_mtime >= STARTED - _TIMESTAMP_SLACK
+
+
+@dataclass
+class HydraOutput:
+    """The job's output directory as the task function found it: what Hydra wrote there for
+    this invocation, so that a rejected config can take it back (:meth:`remove_if_untouched`)."""
+
+    dir: Path
+    hydra_subdir: str | None  # `hydra.output_subdir` (".hydra"), None: not written
+    log_files: dict[Path, bool]  # Hydra's job log in `dir` -> empty and new at the task's start
+    cwd: Path  # where the command was started (`hydra.runtime.cwd`)
+
+    @classmethod
+    def current(cls) -> HydraOutput:
+        """Call first thing in the task function (before anything logs to the job's log)."""
+        from hydra.core.hydra_config import HydraConfig
+
+        hydra_cfg = HydraConfig.get()
+        out = Path(hydra_cfg.runtime.output_dir)
+        logs = {}
+        for handler in logging.getLogger().handlers:
+            if isinstance(handler, logging.FileHandler):
+                file = Path(handler.baseFilename)
+                if file.parent == out:
+                    logs[file] = _written_by_this_invocation(file) and file.stat().st_size == 0
+        return cls(out, hydra_cfg.output_subdir, logs, Path(hydra_cfg.runtime.cwd))
+
+    def untouched(self) -> bool:
+        """True if the directory holds nothing but what Hydra wrote for this invocation: its
+        ``.hydra/`` config files and its job log, created empty by this process."""
+        if not self.dir.is_dir() or self.dir.resolve() in (self.cwd.resolve(), Path.home()):
+            return False
+        allowed = {file.name for file, fresh in self.log_files.items() if fresh}
+        if self.hydra_subdir is not None:
+            allowed.add(self.hydra_subdir)
+            subdir = self.dir / self.hydra_subdir
+            if subdir.exists():
+                if not subdir.is_dir():
+                    return False
+                entries = list(subdir.iterdir())
+                if not all(
+                    p.name in HYDRA_CONFIG_FILES and _written_by_this_invocation(p)
+                    for p in entries
+                ):
+                    return False
+        return all(p.name in allowed for p in self.dir.iterdir())
+
+    def remove_if_untouched(self) -> bool:
+        """Remove the directory if :meth:`untouched`, then its parents left empty below the
+        command's working directory (``outputs/<algo>/<task>/seed10/``); never a directory that
+        holds anything else. True if removed."""
+        if not self.untouched():
+            return False
+        root = logging.getLogger()
+        for handler in list(root.handlers):
+            if isinstance(handler, logging.FileHandler) and Path(handler.baseFilename) in (
+                self.log_files
+            ):
+                root.removeHandler(handler)
+                handler.close()
+        for file in self.log_files:
+            file.unlink(missing_ok=True)
+        if self.hydra_subdir is not None and (self.dir / self.hydra_subdir).is_dir():
+            for name in HYDRA_CONFIG_FILES:
+                (self.dir / self.hydra_subdir / name).unlink(missing_ok=True)
+            (self.dir / self.hydra_subdir).rmdir()
+        self.dir.rmdir()
+        cwd = self.cwd.resolve()
+        parent = self.dir.resolve().parent
+        while parent != cwd and cwd in parent.parents:
+            try:
+                parent.rmdir()  # only if empty
+            except OSError:
+                break
+            parent = parent.parent
+        return True
+
+
+# ----------------------------------------------------------------- the console into the log
+class _LinesToLog:
+    """A stdout that writes through to the console and logs each complete line."""
+
+    def __init__(self, stream, logger: logging.Logger):
+        self._stream, self._logger, self._pending = stream, logger, ""
+
+    def write(self, text: str) -> int:
+        written = self._stream.write(text)
+        *lines, self._pending = (self._pending + text).split("\n")
+        for line in lines:
+            if line.strip():
+                self._logger.info(line.rstrip())
+        return written
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+    def finish(self) -> None:
+        if self._pending.strip():
+            self._logger.info(self._pending.rstrip())
+        self._pending = ""
+
+    def __getattr__(self, name: str):  # encoding, isatty, fileno, ...
+        return getattr(self._stream, name)
+
+
+@contextmanager
+def console_to_log(name: str) -> Iterator[logging.Logger]:
+    """While open, what the recipe prints on stdout (the final table, the verdict, the run
+    directory) also goes, line by line through Python logging, to Hydra's job log
+    (``train.log``), and only there: the console shows it unchanged. Yields a logger that
+    writes to that file only (e.g. for errors)."""
+    files = [h for h in logging.getLogger().handlers if isinstance(h, logging.FileHandler)]
+    logger = logging.getLogger(name)
+    saved = (logger.handlers[:], logger.propagate, logger.level)
+    logger.handlers = files or [logging.NullHandler()]
+    logger.propagate = False
+    logger.setLevel(logging.INFO)
+    stdout = sys.stdout
+    tee = _LinesToLog(stdout, logger)
+    sys.stdout = tee
+    try:
+        yield logger
+    finally:
+        tee.finish()
+        if sys.stdout is tee:
+            sys.stdout = stdout
+        logger.handlers, logger.propagate, logger.level = saved

@@ -3,46 +3,102 @@
     s3rl-train                                  # quick S3RL on SafetyHalfCheetahVelocity-v1
     s3rl-train algo=sac_lag task=SafetyHopperVelocity-v1 seed=20 collector.total_frames=20000
     s3rl-train -m seed=10,20 algo=s3rl,sac_lag  # a sweep
-    s3rl-train resume=outputs/s3rl/.../<run>    # continue an interrupted run
+    s3rl-train resume=outputs/s3rl/.../<run>    # continue a run with its own config
+    s3rl-train resume=<run> collector.total_frames=2000000   # ... with a change (printed, recorded)
     s3rl-train 'seeds=[10,20,30,40,50]'         # five seeds in one process, one batched update
 
 The loop lives in :mod:`s3rl_torchrl.trainer`; this file only parses and validates the config.
+A rejected config leaves no run directory behind; a run's ``train.log`` holds what it printed
+(the final table, the verdict, the contrastive phases it ran and skipped) and its errors.
 """
 
 from __future__ import annotations
 
 import sys
+from typing import NoReturn
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from s3rl_torchrl.recipes import config_dir, quiet_known_warnings
+from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_known_warnings
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
+    TrainConfig,
+    TrainResult,
     register_configs,
     train,
     train_seeds,
     validate,
 )
+from s3rl_torchrl.trainer.resume import resume_config
 
 CONFIG_DIR = str(config_dir())
 register_configs()
 
+REJECTED = (ConfigError, CheckpointError, FileExistsError)
+
+
+def reject(err: Exception, output: HydraOutput) -> NoReturn:
+    """Say why on stderr, take back the run directory Hydra made for this invocation (if it
+    holds nothing else) and exit with status 2."""
+    print(f"s3rl-train: {err}", file=sys.stderr)
+    if not output.remove_if_untouched():  # kept: the error goes to its log too
+        with console_to_log(__name__) as log:
+            log.error("s3rl-train: %s", err)
+    sys.exit(2)
+
+
+def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:
+    """How many contrastive phases ran and were skipped (None: the algorithm has none)."""
+    if not cfg.algo.contrastive:
+        return None
+    c = result.counters
+    line = f"Contrastive phases: {c.contrastive_phases} ran, {c.contrastive_skipped} skipped"
+    if c.contrastive_skipped:
+        b = cfg.algo.contrastive_cfg.batch_size
+        need = (
+            f"fewer than B = {b} unsafe or 2B = {2 * b} safe transitions"
+            if not cfg.algo.contrastive_cfg.graded
+            else f"no label bin with 2B = {2 * b} transitions while the others hold B = {b}"
+        )
+        line += (
+            f" (a phase is skipped while the replay buffer holds {need}; "
+            'docs/representation.md, "When the contrastive phase runs")'
+        )
+    return line + "."
+
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train")
 def _main(cfg: DictConfig) -> float:
+    output = HydraOutput.current()  # before anything writes into the run directory
     try:
-        train_cfg = validate(cfg)
-        output_dir = HydraConfig.get().runtime.output_dir
-        if train_cfg.seeds is not None:
-            results = train_seeds(train_cfg, output_dir).runs
+        if cfg.resume:
+            # The run's own config; the other overrides of this command are its changes.
+            changes = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
+            train_cfg = resume_config(cfg.resume, changes)
         else:
-            results = [train(train_cfg, output_dir)]
-    except (ConfigError, CheckpointError, FileExistsError) as err:
-        print(f"s3rl-train: {err}", file=sys.stderr)
-        sys.exit(2)
+            train_cfg = validate(cfg)
+    except (ConfigError, CheckpointError) as err:
+        reject(err, output)
+    with console_to_log(__name__) as log:
+        log.info("s3rl-train %s", " ".join(HydraConfig.get().overrides.task))
+        try:
+            if train_cfg.seeds is not None:
+                results = train_seeds(train_cfg, output.dir).runs
+            else:
+                results = [train(train_cfg, output.dir)]
+        except REJECTED as err:
+            reject(err, output)
+        except Exception:
+            log.exception("s3rl-train stopped with an error")
+            raise
+        for result in results:
+            summary = contrastive_summary(train_cfg, result)
+            if summary is not None:
+                seed = f" ({result.run_dir.name})" if len(results) > 1 else ""
+                print(summary.replace(":", f"{seed}:", 1))
     # The return value is what Hydra sweepers (e.g. Optuna) optimise (the mean over seeds).
     rewards = [r.final_eval.reward_mean for r in results if r.final_eval is not None]
     return sum(rewards) / len(rewards) if len(rewards) == len(results) else float("nan")

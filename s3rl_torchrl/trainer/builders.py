@@ -568,9 +568,7 @@ def build_updates(
     )
     # The losses' inputs (n-step reward and discount exponent included) and the labelled keys.
     keys = [*loss.in_keys, loss.value_estimator.tensor_keys.steps_to_next_obs, *labelled]
-    return ReplayUpdates(
-        schedule, replay_buffer, list(dict.fromkeys(keys)), nstep.inv if nstep else None
-    )
+    return ReplayUpdates(schedule, replay_buffer, list(dict.fromkeys(keys)), nstep)
 
 
 def set_torch_threads(threads: int) -> None:

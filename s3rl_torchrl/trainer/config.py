@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib.util
 import math
 from dataclasses import dataclass, field, fields, is_dataclass
+from pathlib import Path
 from typing import Any
 
 from hydra.core.config_store import ConfigStore
@@ -551,6 +552,15 @@ def run_dir_name(seed: int, seeds: list[int] | None) -> str:
     return f"seeds{'-'.join(map(str, seeds))}" if seeds else f"seed{seed}"
 
 
+def hydra_run_dir(resume: str | None, algo: str, task: str, seeds: str, now: str) -> str:
+    """Where ``s3rl-train`` runs: ``outputs/<algo>/<task>/<seed10 | seeds10-20>/<time>``, or,
+    for a resume, ``<run>/resumes/<time>`` (that invocation's Hydra files and log, beside the
+    run it continues); ``${s3rl_run_dir:...}`` in configs/train.yaml."""
+    if resume:
+        return str(Path(resume).expanduser() / "resumes" / now)
+    return f"outputs/{algo}/{task}/{seeds}/{now}"
+
+
 def episode_frames(task_name: str, episodes: int) -> int:
     """Frames in ``episodes`` whole episodes of a task: FSRL's ``episode_per_collect`` as a
     torchrl batch size (``${s3rl_episode_frames:${task.name},20}`` in ``experiment=paper``)."""
@@ -573,6 +583,17 @@ def safe_cost_limit(task_name: str) -> float:
     return float(get_task(task_name).safe_cost_limit)
 
 
+def safe_setting(task_name: str, name: str, default: Any) -> Any:
+    """A task's own value of one setting of ``experiment=safe`` (``TaskSpec.safe``), else
+    ``default``: ``${s3rl_safe_setting:${task.name},lagrangian_lr,3e-4}``."""
+    _check_choice("task.name", task_name, tuple(task_names()))
+    settings = get_task(task_name).safe
+    if not hasattr(settings, name):
+        _fail("s3rl_safe_setting", name, f"TaskSpec.safe has no setting {name!r}")
+    value = getattr(settings, name)
+    return default if value is None else value
+
+
 def round_up(value: int, multiple: int) -> int:
     """``value`` rounded up to a multiple of ``multiple``: FSRL's epoch runs whole collects until
     ``step_per_epoch`` frames are reached (``${s3rl_round_up:10000,${collector.frames_per_batch}}``)."""
@@ -584,12 +605,15 @@ def register_configs() -> None:
     and the resolvers the YAMLs use: ``s3rl_run_name`` (default output directories),
     ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs),
     ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only),
-    ``s3rl_safe_cost_limit`` (``experiment=safe``'s per-task limit)."""
+    ``s3rl_safe_cost_limit`` and ``s3rl_safe_setting`` (``experiment=safe``'s per-task limit
+    and settings, from the task registry)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
+    OmegaConf.register_new_resolver("s3rl_run_dir", hydra_run_dir, replace=True)
     OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)
     OmegaConf.register_new_resolver("s3rl_round_up", round_up, replace=True)
     OmegaConf.register_new_resolver("s3rl_lagrangian", lagrangian_for, replace=True)
     OmegaConf.register_new_resolver("s3rl_safe_cost_limit", safe_cost_limit, replace=True)
+    OmegaConf.register_new_resolver("s3rl_safe_setting", safe_setting, replace=True)
     cs = ConfigStore.instance()
     cs.store(name="train_schema", node=TrainConfig)
     cs.store(name="eval_schema", node=EvalRunConfig)

@@ -1,7 +1,12 @@
-"""Evaluate a saved policy: rebuild the run's actor from its checkpoint and roll it out."""
+"""Evaluate a saved policy: rebuild the run's actor from its checkpoint and roll it out.
+
+By default the evaluation uses the run's own evaluation settings, read from the checkpoint's
+config (:func:`eval_settings`), so that it measures what the run's final table measured.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -11,6 +16,71 @@ from s3rl_torchrl.trainer.builders import build_agent, build_replay_buffer
 from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint
 from s3rl_torchrl.trainer.config import TrainConfig
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, record_video
+
+# builders.build_envs seeds a run's test envs at its seed + this offset (apart from the
+# training envs); tests/recipes/test_evaluate.py checks that both agree.
+TEST_SEED_OFFSET = 100_000
+
+# Where each default comes from in the run's config (for the printed summary).
+RUN_SOURCES = {
+    "episodes": "the run's eval.final_episodes",
+    "num_envs": "the run's eval.num_envs",
+    "seed": f"the run's test envs: its seed + {TEST_SEED_OFFSET}",
+    "max_steps": "the run's eval.max_steps",
+}
+
+
+@dataclass
+class EvalSettings:
+    """What an evaluation of a checkpoint runs with, and where each value came from."""
+
+    episodes: int
+    num_envs: int
+    seed: int
+    max_steps: int
+    # name -> "given", or the run's config entry it was read from (RUN_SOURCES)
+    sources: dict[str, str] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        """One line: ``episodes=2 (the run's eval.final_episodes), ...``."""
+        return ", ".join(
+            f"{name}={getattr(self, name)} ({self.sources.get(name, 'given')})"
+            for name in RUN_SOURCES
+        )
+
+    def to_dict(self) -> dict:
+        return {name: getattr(self, name) for name in RUN_SOURCES} | {"sources": self.sources}
+
+
+def eval_settings(
+    cfg: TrainConfig,
+    *,
+    episodes: int | None = None,
+    num_envs: int | None = None,
+    seed: int | None = None,
+    max_steps: int | None = None,
+) -> EvalSettings:
+    """The settings an evaluation of the run ``cfg`` uses: each argument given wins, each
+    ``None`` is the run's own final evaluation's (``eval.final_episodes`` episodes on
+    ``eval.num_envs`` test envs seeded as the run's, rollouts of ``eval.max_steps`` steps;
+    the task's episode length if the run's config has none)."""
+    run = {
+        "episodes": cfg.eval.final_episodes,
+        "num_envs": cfg.eval.num_envs,
+        "seed": cfg.seed + TEST_SEED_OFFSET,
+        "max_steps": cfg.eval.max_steps,
+    }
+    given = {"episodes": episodes, "num_envs": num_envs, "seed": seed, "max_steps": max_steps}
+    values, sources = {}, {}
+    for name, value in given.items():
+        if value is not None:
+            values[name], sources[name] = int(value), "given"
+        else:
+            values[name], sources[name] = run[name], RUN_SOURCES[name]
+    if values["max_steps"] is None:  # a config saved without the validated episode length
+        values["max_steps"] = get_task(cfg.task.name).max_episode_steps
+        sources["max_steps"] = "the task's episode length"
+    return EvalSettings(**values, sources=sources)
 
 
 def load_policy(checkpoint: str | Path):
@@ -32,26 +102,46 @@ def load_policy(checkpoint: str | Path):
     return agent.actor, cfg
 
 
+def evaluate_policy(
+    actor,
+    cfg: TrainConfig,
+    settings: EvalSettings,
+    video_path: str | Path | None = None,
+) -> EvalResult:
+    """Deterministic evaluation of the run ``cfg``'s ``actor`` with ``settings`` on fresh test
+    envs (built as the run's: same batching), and an optional video of one episode."""
+    env = make_env(
+        cfg.task.name,
+        num_envs=settings.num_envs,
+        seed=settings.seed,
+        batching=cfg.collector.batching,
+    )
+    try:
+        result = evaluate(env, actor, settings.episodes, settings.max_steps)
+    finally:
+        env.close()
+    if video_path is not None:
+        video_env = make_env(cfg.task.name, seed=settings.seed, from_pixels=True, pixels_only=False)
+        record_video(video_env, actor, video_path, settings.max_steps)
+        video_env.close()
+    return result
+
+
 def evaluate_checkpoint(
     checkpoint: str | Path,
-    episodes: int = 10,
-    num_envs: int = 2,
-    seed: int = 0,
+    episodes: int | None = None,
+    num_envs: int | None = None,
+    seed: int | None = None,
     max_steps: int | None = None,
     video_path: str | Path | None = None,
 ) -> tuple[EvalResult, TrainConfig]:
     """Deterministic evaluation of a checkpoint on fresh test envs (and an optional video).
 
-    ``max_steps=None`` rolls out the task's episode length (the registry's).
+    Every setting left at ``None`` is the run's own (:func:`eval_settings`): a run trained with
+    ``eval.max_steps=50`` is evaluated on 50-step rollouts unless ``max_steps`` says otherwise.
     """
     actor, cfg = load_policy(checkpoint)
-    if max_steps is None:
-        max_steps = get_task(cfg.task.name).max_episode_steps
-    env = make_env(cfg.task.name, num_envs=num_envs, seed=seed)
-    result = evaluate(env, actor, episodes, max_steps)
-    env.close()
-    if video_path is not None:
-        video_env = make_env(cfg.task.name, seed=seed, from_pixels=True, pixels_only=False)
-        record_video(video_env, actor, video_path, max_steps)
-        video_env.close()
-    return result, cfg
+    settings = eval_settings(
+        cfg, episodes=episodes, num_envs=num_envs, seed=seed, max_steps=max_steps
+    )
+    return evaluate_policy(actor, cfg, settings, video_path), cfg

@@ -38,8 +38,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from tensordict import TensorDictBase
-from torchrl.collectors import Collector
+from tensordict import TensorDict, TensorDictBase
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.diagnostics.critics import (
@@ -48,6 +47,7 @@ from s3rl_torchrl.diagnostics.critics import (
     critic_calibration,
 )
 from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
+from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, restore_env
 from s3rl_torchrl.modules import get_policy_encoder
 from s3rl_torchrl.trainer.builders import (
     SAFE_LABEL_KEY,
@@ -66,10 +66,12 @@ from s3rl_torchrl.trainer.checkpoint import (
     CheckpointError,
     capture_rng_state,
     check_compatible,
+    check_writable,
     load_checkpoint,
     restore_rng_state,
     save_checkpoint,
 )
+from s3rl_torchrl.trainer.collector import ResumableCollector
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.evaluation import (
@@ -81,6 +83,7 @@ from s3rl_torchrl.trainer.evaluation import (
     format_table,
 )
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
+from s3rl_torchrl.trainer.resume import RESUME_LOCKED
 
 FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
@@ -91,22 +94,6 @@ CONTRASTIVE_DIAGNOSTICS = (
     "mi_lower_bound",
 )
 CONFIG_FILE = "config.json"
-# Config fields the saved weights and buffer depend on: a resume must not change them.
-RESUME_LOCKED = [
-    "task.name",
-    "algo.name",
-    "algo.lagrangian",
-    "algo.lagrangian_cadence",
-    "algo.contrastive",
-    "algo.buffer_size",
-    "algo.n_step",
-    "network.actor_hidden",
-    "network.critic_hidden",
-    "network.activation",
-    "collector.num_envs",
-    "collector.frames_per_batch",
-    "collector.frames_per_epoch",
-]
 BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
 # Finished training episodes the critic calibration reads each epoch (diagnostics/critics.py).
 CALIBRATION_EPISODES = 10
@@ -180,6 +167,11 @@ def compile_loss(fn: Callable) -> Callable:
     )
 
 
+def _tensordict(saved: dict[str, Any]) -> TensorDict:
+    """A tensordict saved as ``{"data": td.to_dict(), "batch_size": [...]}``."""
+    return TensorDict(saved["data"], batch_size=saved["batch_size"])
+
+
 def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
     np.random.seed(seed % 2**32)
@@ -205,6 +197,9 @@ class Trainer:
             check_total_frames(cfg, checkpoint["counters"]["frames"])
             run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
         self.run_dir = Path(run_dir)
+        # A read-only run directory: one clean line before anything is built or trained.
+        check_writable(self.run_dir)
+        check_writable(self.run_dir / "checkpoints")
         if checkpoint is None:
             # Before anything is built or written, so that run's files stay as they are.
             ensure_new_run_dir(self.run_dir)
@@ -237,9 +232,23 @@ class Trainer:
         )
         self.counters = Counters()
         self.best = BestFeasible()
+        # The collector and, until it is built on resume, the checkpoint's collector state.
+        self._collector: ResumableCollector | None = None
+        self._resume_collector: dict[str, Any] | None = None
+        self._train_episodes: list[tuple[float, float]] = []  # (reward, cost) this epoch
+        self._last_losses: dict[str, torch.Tensor] = {}
+        self._last_contrastive: dict[str, float] = {}
+        # Why a resume cannot continue the interrupted run exactly (None: it can, or new run).
+        self.inexact_resume: str | None = None
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
-            record_resume(self.run_dir, checkpoint["config"], to_container(cfg), self.counters)
+            record_resume(
+                self.run_dir,
+                checkpoint["config"],
+                to_container(cfg),
+                self.counters,
+                inexact=self.inexact_resume,
+            )
         else:
             (self.run_dir / CONFIG_FILE).write_text(json.dumps(to_container(cfg), indent=2))
         logger = make_torchrl_logger(
@@ -253,9 +262,6 @@ class Trainer:
             self.run_dir, logger, resume_frames=self.counters.frames if checkpoint else None
         )
         self.history: list[dict[str, Any]] = []
-        self._train_episodes: list[tuple[float, float]] = []  # (reward, cost) this epoch
-        self._last_losses: dict[str, torch.Tensor] = {}
-        self._last_contrastive: dict[str, float] = {}
 
     # ----------------------------------------------------------------------------- the loop
     def run(self) -> TrainResult:
@@ -268,28 +274,30 @@ class Trainer:
             disable=not cfg.logger.progress_bar,
             dynamic_ncols=True,
         )
+        collector = None
         try:
+            # Built before anything else runs, so that a resumed run can put its envs and
+            # carrier back first (_start_collector); None when no frame is left to collect.
+            collector = self._start_collector()
             # A resumed run first pays what the interrupted one owed for its last batch.
             if not self._finish_batch():
                 return self._interrupted(progress)
-            # A run resumed after its last batch has nothing left to collect.
-            remaining = cfg.collector.total_frames - c.frames
-            collector = self._make_collector() if remaining > 0 else []
-            for batch in collector:
+            for batch in collector if collector is not None else []:
                 c.frames += batch.numel()
                 self._store(batch)
                 self._update_lagrangian(batch)
                 c.pending_updates += self._updates_owed(batch.numel())
                 progress.update(batch.numel())
                 if not self._finish_batch():
-                    collector.shutdown()
                     return self._interrupted(progress)
                 progress.set_postfix(self._progress_postfix(), refresh=False)
-            if remaining > 0:
-                collector.shutdown()
-            final = self._final_evaluation()
+            final = self._saved_final_evaluation() or self._final_evaluation()
             return TrainResult(self.run_dir, "finished", c, final, self.history)
         finally:
+            if collector is not None:
+                # A shut-down collector has no carrier: keep what a later save() needs.
+                self._resume_collector, self._collector = self._collector_state(), None
+                collector.shutdown()
             progress.close()
             self.stop.uninstall()
 
@@ -313,10 +321,29 @@ class Trainer:
         return frames // collector.frames_per_epoch
 
     # ----------------------------------------------------------------------------- steps
-    def _make_collector(self) -> Collector:
+    def _start_collector(self) -> ResumableCollector | None:
+        """The training collector, for the frames left; on resume, the envs' state and the
+        carrier of the interrupted run are put back, so that the same episodes go on."""
+        if self.cfg.collector.total_frames <= self.counters.frames:
+            return None
+        saved = self._resume_collector
+        if saved is None:
+            self._collector = self._make_collector()
+            return self._collector
+        # Building the collector resets the envs and may run the policy once: nothing of it
+        # is kept, so the random streams are put back as the checkpoint left them.
+        rng = capture_rng_state()
+        collector = self._make_collector()
+        restore_rng_state(rng)
+        restore_env(self.train_env, saved["train_env"])
+        collector.load_carrier(_tensordict(saved["carrier"]))
+        self._collector, self._resume_collector = collector, None
+        return collector
+
+    def _make_collector(self) -> ResumableCollector:
         cfg, c = self.cfg, self.counters
         remaining = cfg.collector.total_frames - c.frames
-        return Collector(
+        return ResumableCollector(
             self.train_env,
             self.agent.policy,  # DDPG: the actor with exploration noise
             frames_per_batch=cfg.collector.frames_per_batch,
@@ -487,6 +514,27 @@ class Trainer:
         lagrangian = getattr(self.agent.loss, "lagrangian", None)
         return float(lagrangian.sum()) if lagrangian is not None and lagrangian.numel() else 0.0
 
+    def _saved_final_evaluation(self) -> EvalResult | None:
+        """A finished run resumed without more frames: its ``final_eval.json`` stands (the same
+        weights evaluated again would give other episodes); printed, not recomputed."""
+        path = self.run_dir / FINAL_EVAL_FILE
+        if self.cfg.resume is None or self._collector is not None or not path.is_file():
+            return None
+        saved = json.loads(path.read_text())
+        saved.pop("best_feasible", None)
+        result = EvalResult(**saved)
+        label = f"{self.cfg.algo.name} {self.cfg.task.name} seed {self.cfg.seed}"
+        table = format_table(
+            {label: result},
+            f"Final evaluation (saved in {path}, not recomputed): {result.episodes} episodes",
+            grad_steps={label: self.counters.grad_steps},
+        )
+        verdict = constraint_verdict(
+            result.cost_mean, self.cfg.task.cost_limit, self.counters.frames
+        )
+        print(f"\n{table}\n\n{verdict}\n\nRun directory: {self.run_dir}\n")
+        return result
+
     def _final_evaluation(self) -> EvalResult:
         """The last policy's evaluation and, beside it, the best-feasible checkpoint's
         (``final_eval.json``: the last policy's at the top level, the other under
@@ -548,6 +596,29 @@ class Trainer:
             "recent_episodes": self.recent_episodes.state_dict()
             if self.recent_episodes is not None
             else None,
+            # What the next batch and the epoch's row depend on besides the networks: the
+            # envs' simulators and generators and the collector's carrier (None where a task
+            # cannot be restored exactly), and the epoch's training episodes and last losses.
+            "collector": self._collector_state(),
+            "test_env": env_snapshot(self.test_env),
+            "updates": self.updates.state_dict(),
+            "epoch_progress": {
+                "train_episodes": [list(e) for e in self._train_episodes],
+                "last_losses": {k: v.detach().clone() for k, v in self._last_losses.items()},
+                "last_contrastive": dict(self._last_contrastive),
+            },
+        }
+
+    def _collector_state(self) -> dict[str, Any] | None:
+        if self._collector is None:  # resumed, not started yet: the checkpoint's, unchanged
+            return self._resume_collector
+        snapshot = env_snapshot(self.train_env)
+        if snapshot is None:
+            return None
+        carrier = self._collector.carrier
+        return {
+            "train_env": snapshot,
+            "carrier": {"data": carrier.to_dict(), "batch_size": list(carrier.batch_size)},
         }
 
     def _save_best(self) -> Path:
@@ -584,6 +655,27 @@ class Trainer:
         self.best = BestFeasible(**state.get("best_feasible", {}))
         if self.recent_episodes is not None and state.get("recent_episodes") is not None:
             self.recent_episodes.load_state_dict(state["recent_episodes"])
+        self.updates.load_state_dict(state.get("updates") or {})
+        progress = state.get("epoch_progress")
+        if progress is not None:
+            self._train_episodes = [tuple(e) for e in progress["train_episodes"]]
+            self._last_losses = dict(progress["last_losses"])
+            self._last_contrastive = dict(progress["last_contrastive"])
+        if state.get("test_env") is not None:
+            restore_env(self.test_env, state["test_env"])
+        self._resume_collector = state.get("collector")
+        exact = self._resume_collector is not None or (
+            self.counters.frames >= self.cfg.collector.total_frames
+        )
+        if not exact:
+            reason = exact_restore_unsupported(self.train_env) or (
+                "the checkpoint was written before checkpoints kept the envs' state"
+            )
+            self.inexact_resume = reason
+            print(
+                f"Resuming {self.run_dir} inexactly: {reason}; every training episode restarts "
+                "here, so the rest of the run differs from an uninterrupted one."
+            )
         restore_rng_state(state["rng"])
 
     def _label_unlabelled_steps(self) -> None:
@@ -610,7 +702,9 @@ def check_total_frames(cfg: TrainConfig, frames: int) -> None:
         )
 
 
-def record_resume(run_dir: Path, saved: dict, current: dict, counters: Counters) -> None:
+def record_resume(
+    run_dir: Path, saved: dict, current: dict, counters: Counters, inexact: str | None = None
+) -> None:
     """What a resume changed, kept in the run's ``config.json``: it then holds the config the
     run continues with, and under ``resumes`` every resume's frame count and the values it
     changed (``[before, after]``), e.g. ``compile`` or an extended ``collector.total_frames``.
@@ -622,7 +716,10 @@ def record_resume(run_dir: Path, saved: dict, current: dict, counters: Counters)
         for key, (before, after) in _flat_differences(saved, current).items()
         if key != "resume"
     }
-    history.append({"frames": counters.frames, "changed": changed})
+    entry: dict[str, Any] = {"frames": counters.frames, "changed": changed, "exact": inexact is None}
+    if inexact is not None:
+        entry["inexact_reason"] = inexact
+    history.append(entry)
     path.write_text(json.dumps({**current, "resumes": history}, indent=2))
     final = run_dir / FINAL_EVAL_FILE
     if final.is_file() and current["collector"]["total_frames"] > counters.frames:

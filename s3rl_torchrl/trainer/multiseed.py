@@ -30,7 +30,7 @@ from tensordict import TensorDictBase
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.objectives.stacked import StackedSACLag, draw_noise
-from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError
+from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError, check_writable
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.loop import StopRequest, Trainer, TrainResult, compile_loss
 
@@ -118,6 +118,7 @@ class MultiSeedTrainer:
         self._action_dim = self.members[0].train_env.action_spec.shape[-1]
 
     def _check_group_dir(self) -> None:
+        check_writable(self.run_dir)  # one clean line, before anything is built
         group_file = self.run_dir / GROUP_FILE
         if not self.cfg.resume:
             if group_file.exists():
@@ -162,13 +163,15 @@ class MultiSeedTrainer:
         )
         collectors = []
         try:
+            # Built first, so that a resumed group puts each seed's envs and carrier back before
+            # anything else runs (Trainer._start_collector); none when no frame is left.
+            for index, member in enumerate(self.members):
+                with self._seed_rng(index):
+                    collectors.append(member._start_collector())
             # A resumed group first pays what the interrupted one owed for its last batches.
             if not self._finish_batch():
                 return self._interrupted(progress)
-            if cfg.collector.total_frames > lead.frames:
-                for index, member in enumerate(self.members):
-                    with self._seed_rng(index):
-                        collectors.append(member._make_collector())
+            if all(collector is not None for collector in collectors):
                 iterators = [iter(collector) for collector in collectors]
                 while True:
                     batches = []
@@ -189,15 +192,19 @@ class MultiSeedTrainer:
             finals = []
             for index, member in enumerate(self.members):
                 with self._seed_rng(index):
-                    finals.append(member._final_evaluation())
+                    finals.append(member._saved_final_evaluation() or member._final_evaluation())
             runs = [
                 TrainResult(m.run_dir, "finished", m.counters, final, m.history)
                 for m, final in zip(self.members, finals, strict=True)
             ]
             return MultiSeedResult(self.run_dir, "finished", runs)
         finally:
-            for collector in collectors:
-                collector.shutdown()
+            for member, collector in zip(self.members, collectors):
+                if collector is not None:
+                    # A shut-down collector has no carrier: keep what a later save() needs.
+                    member._resume_collector = member._collector_state()
+                    member._collector = None
+                    collector.shutdown()
             progress.close()
             self.stop.uninstall()
 

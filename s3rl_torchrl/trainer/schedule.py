@@ -25,12 +25,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 
 if TYPE_CHECKING:
     from torchrl.data import TensorDictReplayBuffer
+
+    from s3rl_torchrl.objectives.nstep import NStepTransform
 
 
 # What a schedule reads of a run's config. This module owns these types, so it imports nothing
@@ -189,13 +191,13 @@ class ReplayUpdates:
         schedule: OffPolicySchedule,
         replay_buffer: TensorDictReplayBuffer,
         stored_keys: list,
-        nstep: Callable[[TensorDictBase], TensorDictBase | None] | None = None,
+        nstep: NStepTransform | None = None,
     ) -> None:
         self.schedule, self.replay_buffer = schedule, replay_buffer
         self.stored_keys, self.nstep = stored_keys, nstep
 
     def store(self, batch: TensorDictBase) -> None:
-        data = self.nstep(batch) if self.nstep is not None else batch
+        data = self.nstep.inv(batch) if self.nstep is not None else batch
         if data is not None and data.numel():
             # Not strict: without n-step returns (n_step=1) there is no `steps_to_next_obs`.
             self.replay_buffer.extend(data.select(*self.stored_keys, strict=False).reshape(-1))
@@ -212,6 +214,19 @@ class ReplayUpdates:
 
     def load(self, checkpoint_dir: Path) -> None:
         pass
+
+    def state_dict(self) -> dict[str, Any]:
+        """The n-step transform's held-back frames (the start of the next batch's windows)."""
+        held = None if self.nstep is None else self.nstep.held_frames
+        if held is None:
+            return {"nstep_held": None}
+        return {"nstep_held": held.to_dict(), "nstep_held_shape": list(held.batch_size)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if self.nstep is None or state.get("nstep_held") is None:
+            return
+        held = TensorDict(state["nstep_held"], batch_size=state["nstep_held_shape"])
+        self.nstep.load_held_frames(held)
 
 
 class RolloutUpdates:
@@ -255,3 +270,9 @@ class RolloutUpdates:
 
     def load(self, checkpoint_dir: Path) -> None:
         self.rollout.loads(Path(checkpoint_dir) / self.ROLLOUT_DIR)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        pass

@@ -406,13 +406,21 @@ def test_bad_data_errors():
     )
     with pytest.raises(TypeError, match="bool"):
         not_bool.extend(transitions([True, False]))
+    # The advice names both ways a collector's [num_envs, time] batch goes in: unflattened
+    # into a buffer with an n-step transform (it flattens after building each env's windows),
+    # flattened into one without.
+    advice = (
+        r"With an n-step transform in the buffer \(make_nstep_transform\), extend with the "
+        r"collector's unflattened \[num_envs, time\] batch, `rb.extend\(data\)`.*Without one, "
+        r"flatten it first: `rb.extend\(data.reshape\(-1\)\)`"
+    )
     unflattened = TensorDictReplayBuffer(storage=LazyTensorStorage(10), sampler=SafeUnsafeSampler())
-    with pytest.raises(ValueError, match="reshape\\(-1\\)"):
+    with pytest.raises(ValueError, match="one transition with one label.*" + advice):
         unflattened.extend(transitions([True] * 6).reshape(2, 3))  # 2 slots of 3 steps each
     two_dim = TensorDictReplayBuffer(
         storage=LazyTensorStorage(10, ndim=2), sampler=SafeUnsafeSampler()
     )
-    with pytest.raises(ValueError, match="1-D storage"):
+    with pytest.raises(ValueError, match="1-D storage.*default ndim=1.*" + advice):
         two_dim.extend(transitions([True] * 4).reshape(2, 2))
 
 

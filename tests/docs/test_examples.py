@@ -1,11 +1,17 @@
-"""The "own TorchRL loop" example of docs/objectives.md runs as written, with smaller numbers."""
+"""The loops of docs/objectives.md and docs/representation.md run as written, with smaller
+numbers."""
 
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
+import pytest
 import torch
+from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
+
+from s3rl_torchrl.data import SafeUnsafeSampler
+from s3rl_torchrl.objectives import make_nstep_transform
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "objectives.md"
 # (as written in the docs, what the test runs instead): a few hundred frames, seconds.
@@ -117,3 +123,55 @@ def test_contrastive_phase_on_ddpg_lag_example_runs():
     actor_ids = {id(p) for p in namespace["actor"].parameters()}
     assert {id(p) for p in phase.loss.encoder_parameters()} <= actor_ids
     assert all(torch.isfinite(v).all() for v in metrics.values())
+
+
+# docs/representation.md, "One storage, RL batches and contrastive batches", with smaller numbers.
+ONE_STORAGE_SHRINK = [
+    ("num_envs=4", "num_envs=2"),
+    ("LazyTensorStorage(100_000)", "LazyTensorStorage(1_000)"),
+    ("batch_size=256", "batch_size=16"),
+    ("contrastive_view(rb, 256)", "contrastive_view(rb, 8)"),
+    ("num_steps=50", "num_steps=3"),
+    ("frames_per_batch=2000", "frames_per_batch=100"),
+    ("total_frames=100_000", "total_frames=300"),
+    ("grad_steps % 1000", "grad_steps % 10"),
+]
+
+
+def test_one_storage_example_runs():
+    """The page's first loop runs as written: an n-step buffer extended with the collector's
+    unflattened batches, RL batches and contrastive phases from one storage."""
+    section = REPRESENTATION_DOC.read_text().split("## One storage, RL batches", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    for written, small in ONE_STORAGE_SHRINK:
+        assert written in code, f"the docs example no longer contains {written!r}"
+        code = code.replace(written, small)
+    torch.manual_seed(0)
+    namespace: dict = {}
+    exec(compile(code, str(REPRESENTATION_DOC), "exec"), namespace)
+    rb, phase, grad_steps = namespace["rb"], namespace["phase"], namespace["grad_steps"]
+    # 300 frames on 2 env copies: the 2-step transform builds each copy's windows along its 150
+    # steps and holds back its last 2 frames, so 2 x 148 transitions are stored (a flattened
+    # batch would be one 300-step trajectory: 298).
+    assert len(rb) == 2 * (150 - 2)
+    stored = rb.storage[: len(rb)]
+    # Every window lies within one env copy: its next observation is steps_to_next_obs steps
+    # later in the same episode (HalfCheetah never terminates; 150 steps do not truncate).
+    assert torch.equal(
+        stored["next", "step_count"].squeeze(-1) - stored["step_count"].squeeze(-1),
+        stored["steps_to_next_obs"],
+    )
+    assert (stored["steps_to_next_obs"] == 2).all()
+    # The batch is RL-sized, and the phase was called every 10 gradient steps. HalfCheetah under
+    # a young policy has no unsafe step, so each call skipped (docs: "When the contrastive
+    # phase runs").
+    assert namespace["batch"].shape == (16,)
+    assert not bool((~stored["next", "safe"]).any())
+    assert (phase.num_runs, phase.num_skipped) == (0, grad_steps // 10) and grad_steps == 60
+    # The advice beside the loop: the same buffer refuses a flattened batch.
+    flat_rb = TensorDictReplayBuffer(
+        storage=LazyTensorStorage(1_000), sampler=SafeUnsafeSampler(),
+        transform=make_nstep_transform(2, 0.99),
+    )
+    with pytest.raises(ValueError, match="unflattened"):
+        flat_rb.extend(namespace["data"].reshape(-1))

@@ -630,3 +630,91 @@ def test_lambda_reaches_a_compiled_loss_without_recompiling():
     torch.manual_seed(0)
     eager = loss(batch.copy())  # lambda 7.25, eager: the same actor loss as compiled
     torch.testing.assert_close(outputs[-1]["loss_actor"], eager["loss_actor"])
+
+
+# --------------------------------------------------------------------------- sound cost critics
+READS = {"min": lambda a, b: torch.minimum(a, b), "max": torch.maximum, "mean": lambda a, b: (a + b) / 2}
+
+
+@pytest.mark.parametrize("read", ["min", "max", "mean"])
+@pytest.mark.parametrize("nonnegative", [False, True])
+def test_cost_targets_read_the_pair_as_configured_by_hand(read, nonnegative):
+    loss, actor, _, costs = make_loss(
+        2, cost_critic_read=read, cost_nonnegative=nonnegative, entropy_in_cost_target=False
+    )
+    batch = make_batch(num_costs=2, steps=False)
+    torch.manual_seed(6)
+    _, target_c = loss.compute_targets(batch)
+    torch.manual_seed(6)
+    nxt = batch["next", "observation"]
+    a_next, _ = sample(actor, nxt)
+    alive = (~batch["next", "terminated"].squeeze(-1)).float()
+    q_c = q_values(costs, nxt, a_next)
+    for i in range(2):
+        v = READS[read](q_c[2 * i], q_c[2 * i + 1])
+        if nonnegative:
+            v = v.clamp_min(0.0)
+        close(target_c[:, i], batch["next", "cost"][:, i] + GAMMA * alive * v, atol=1e-5)
+
+
+def test_nonnegative_cost_values_clamp_a_negative_critic():
+    # Biases of -5 make every cost value negative: the target then is the cost itself, and the
+    # actor's penalty term is 0 (no gradient pulls the policy towards a negative cost value).
+    loss, *_ = make_loss(1, cost_nonnegative=True, entropy_in_cost_target=False)
+    last_bias = [k for k in loss.cost_qvalue_network_params.flatten_keys().keys() if "bias" in k][-1]
+    with torch.no_grad():
+        loss.cost_qvalue_network_params.flatten_keys()[last_bias].fill_(-5.0)
+        loss.target_cost_qvalue_network_params.flatten_keys()[last_bias].fill_(-5.0)
+    batch = make_batch(steps=False)
+    _, target_c = loss.compute_targets(batch)
+    close(target_c, batch["next", "cost"])
+    loss.lagrangian = 1.0
+    terms = loss.actor_loss_terms(batch.clone())
+    assert terms["cost"].item() == 0.0
+
+
+@pytest.mark.parametrize("entropy_rescaling", [True, False])
+def test_entropy_rescaling_by_hand(entropy_rescaling):
+    loss, actor, critics, costs = make_loss(
+        1, rescaling=True, entropy_rescaling=entropy_rescaling, cost_critic_read="max"
+    )
+    loss.lagrangian = 3.0
+    batch = make_batch()
+    obs = batch["observation"]
+    torch.manual_seed(7)
+    loss_actor, _ = loss.actor_loss(batch.clone())
+    torch.manual_seed(7)
+    a, logp = sample(actor, obs)
+    q_c = q_values(costs, obs, a).max(0)[0]
+    q_r = q_values(critics, obs, a).min(0)[0]
+    if entropy_rescaling:  # FSRL: the whole loss over 1 + lambda
+        expected = (ALPHA * logp - q_r + 3.0 * q_c).mean() / 4.0
+    else:  # alpha's term outside the rescaling
+        expected = (ALPHA * logp).mean() + (3.0 * q_c - q_r).mean() / 4.0
+    close(loss_actor, expected)
+    # The terms the diagnostics read add up to the same loss, for the same random draw.
+    torch.manual_seed(7)
+    terms = loss.actor_loss_terms(batch.clone())
+    close(sum(terms.values()), expected)
+    scale = 4.0 if entropy_rescaling else 1.0
+    close(terms["entropy"], (ALPHA * logp).mean() / scale)
+    close(terms["cost"], 3.0 * q_c.mean() / 4.0)
+
+
+def test_default_is_fsrl_and_bad_read_is_refused():
+    loss, *_ = make_loss(1)
+    assert (loss.cost_critic_read, loss.cost_nonnegative, loss.entropy_rescaling) == (
+        "min",
+        False,
+        True,
+    )
+    with pytest.raises(ValueError, match="cost_critic_read 'median'.*'min', 'max', 'mean'"):
+        make_loss(1, cost_critic_read="median")
+
+
+def test_critic_values_are_the_current_critics():
+    loss, _, critics, costs = make_loss(2)
+    batch = make_batch(num_costs=2)
+    q_r, q_c = loss.critic_values(batch)
+    close(q_r, q_values(critics, batch["observation"], batch["action"]))
+    close(q_c.flatten(0, 1), q_values(costs, batch["observation"], batch["action"]))

@@ -32,6 +32,32 @@ def test_train_then_evaluate(tmp_path):
     final = json.loads((run_dir / "final_eval.json").read_text())
     assert final["episodes"] == 2
     assert (run_dir / ".hydra" / "config.yaml").is_file()  # the resolved config
+    # train.log holds what the run printed: the command, the final table, the run directory.
+    log = (run_dir / "train.log").read_text()
+    assert "s3rl-train experiment=tiny" in log
+    table_row = next(line for line in out.stdout.splitlines() if line.startswith("| sac_lag "))
+    assert f"- {table_row}" in log and f"Run directory: {run_dir}" in log
+    assert "Contrastive phases" not in out.stdout  # sac_lag has none
+
+    # Without settings, s3rl-eval evaluates as the run did (tiny: 2 episodes of 50 steps, not
+    # 1000-step episodes) and says so, and where eval.json is.
+    eval_dir = tmp_path / "eval_defaults"
+    out = run("s3rl-eval", f"checkpoint={run_dir}", f"hydra.run.dir={eval_dir}", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    result = json.loads((eval_dir / "eval.json").read_text())
+    assert result["episodes"] == 2 and result["episode_lengths"] == [50, 50]
+    assert result["settings"] == {
+        "episodes": 2, "num_envs": 1, "seed": 100_010, "max_steps": 50,
+        "sources": {
+            "episodes": "the run's eval.final_episodes",
+            "num_envs": "the run's eval.num_envs",
+            "seed": "the run's test envs: its seed + 100000",
+            "max_steps": "the run's eval.max_steps",
+        },
+    }
+    assert "max_steps=50 (the run's eval.max_steps)" in out.stdout
+    assert f"Results: {eval_dir / 'eval.json'}" in out.stdout
+    assert "Results: " in (eval_dir / "evaluate.log").read_text()
 
     eval_dir = tmp_path / "eval"
     out = run(
@@ -42,6 +68,7 @@ def test_train_then_evaluate(tmp_path):
     result = json.loads((eval_dir / "eval.json").read_text())
     assert result["episodes"] == 3 and result["length_mean"] == 30.0
     assert "sac_lag SafetyHalfCheetahVelocity-v1 seed 10" in out.stdout
+    assert "episodes=3 (given)" in out.stdout and "max_steps=30 (given)" in out.stdout
 
     # A video through MuJoCo's offscreen renderer (EGL here; see docs/recipes.md).
     video = tmp_path / "episode.gif"
@@ -76,7 +103,19 @@ def test_bad_override_fails_before_training(tmp_path):
               cwd=tmp_path)
     assert out.returncode == 2
     assert "Invalid value -2.0 for 'algo.update_per_step'" in out.stderr
-    assert not (tmp_path / "r" / "metrics.csv").exists()
+    # A rejected config writes nothing: no run directory (Hydra made one; the recipe removed
+    # it), and in the default place no outputs/<algo>/<task>/seed10/ chain either.
+    assert list(tmp_path.iterdir()) == []
+    out = run("s3rl-train", *TINY, "algo.update_per_step=-2", cwd=tmp_path)
+    assert out.returncode == 2 and list(tmp_path.iterdir()) == []
+    # A directory that holds anything else is left alone (Hydra's files and all).
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep me")
+    out = run("s3rl-train", *TINY, "algo.update_per_step=-2", f"hydra.run.dir={mine}",
+              cwd=tmp_path)
+    assert out.returncode == 2 and (mine / "notes.txt").read_text() == "keep me"
+    assert "Invalid value -2.0" in (mine / "train.log").read_text()
     out = run("s3rl-train", *TINY, "algo=trpo_lag", cwd=tmp_path)
     assert out.returncode != 0 and "Available options in 'algo'" in out.stderr
     assert "ppo_lag" in out.stderr and "s3rl_ddpg_lag" in out.stderr
@@ -87,6 +126,27 @@ def test_eval_rejects_a_corrupt_checkpoint(tmp_path):
     bad.write_bytes(b"not a checkpoint")
     out = run("s3rl-eval", f"checkpoint={bad}", f"hydra.run.dir={tmp_path / 'e'}", cwd=tmp_path)
     assert out.returncode == 2 and "is corrupt or not a s3rl-torchrl checkpoint" in out.stderr
+    assert not (tmp_path / "e").exists()
+
+
+def test_eval_without_checkpoint_and_its_help(tmp_path):
+    out = run("s3rl-eval", cwd=tmp_path)
+    assert out.returncode == 2 and out.stdout == ""
+    # One line naming the option, with an example; no traceback, no output directory.
+    assert out.stderr.count("\n") == 1 and "Traceback" not in out.stderr
+    assert out.stderr.startswith("s3rl-eval: missing checkpoint=")
+    assert "e.g. s3rl-eval checkpoint=outputs/" in out.stderr
+    assert list(tmp_path.iterdir()) == []
+    # --help lists s3rl-eval's options, not s3rl-train's config groups (which it rejects).
+    out = run("s3rl-eval", "--help", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "Configuration groups" not in out.stdout
+    for group in ("algo:", "task:", "experiment:", "critic:", "SafetyHopperVelocity"):
+        assert group not in out.stdout
+    for option in ("checkpoint", "episodes", "num_envs", "seed", "max_steps", "video_path"):
+        assert f"\n{option} " in out.stdout
+    out = run("s3rl-eval", "algo=sac", "checkpoint=x", cwd=tmp_path)
+    assert out.returncode != 0 and "algo" in out.stderr
 
 
 @pytest.mark.parametrize("launcher", ["basic", "parallel", "local_submitit"])

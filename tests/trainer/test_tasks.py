@@ -91,9 +91,9 @@ def test_s3rl_train_and_eval_cli_on_a_bullet_task(tmp_path):
     assert out.returncode == 0, out.stderr
     assert "| run | episodes | reward | cost | length | safe steps (%) |" in out.stdout
     assert json.loads((run_dir / "final_eval.json").read_text())["episodes"] == 2
-    # s3rl-eval without max_steps rolls out whole episodes: the Ball never terminates, so
-    # every episode lasts the 100-step time limit.
-    out = _run("s3rl-eval", f"checkpoint={run_dir}", "episodes=2", "num_envs=1",
+    # 200-step rollouts: the Ball never terminates, so each episode lasts the 100-step time
+    # limit (without max_steps, s3rl-eval takes the run's own: 50 under experiment=tiny).
+    out = _run("s3rl-eval", f"checkpoint={run_dir}", "episodes=2", "num_envs=1", "max_steps=200",
                f"hydra.run.dir={eval_dir}", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     result = json.loads((eval_dir / "eval.json").read_text())

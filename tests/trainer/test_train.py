@@ -214,7 +214,7 @@ def test_resume_rejects_a_different_network(tiny_config, tmp_path):
     assert (tmp_path / "metrics.csv").read_text() == metrics_before  # nothing lost
 
 
-def test_resuming_a_finished_run_only_evaluates(tiny_config, tmp_path):
+def test_resuming_a_finished_run_changes_nothing(tiny_config, tmp_path):
     cfg = tiny_config("algo=sac", "collector.total_frames=200")
     first = train(cfg, tmp_path)
     cfg.resume = str(tmp_path)
@@ -391,7 +391,7 @@ def test_extending_a_finished_run_continues_it(tiny_config, tmp_path):
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["collector"]["total_frames"] == 600
     assert config["resumes"] == [
-        {"frames": 400, "changed": {"collector.total_frames": [400, 600]}}
+        {"frames": 400, "changed": {"collector.total_frames": [400, 600]}, "exact": True}
     ]
 
 
@@ -407,4 +407,4 @@ def test_a_resume_records_what_it_changed(tiny_config, tmp_path):
     train(resumed, tmp_path / "ignored")
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["threads"] == 2
-    assert config["resumes"] == [{"frames": 200, "changed": {"threads": [1, 2]}}]
+    assert config["resumes"] == [{"frames": 200, "changed": {"threads": [1, 2]}, "exact": True}]

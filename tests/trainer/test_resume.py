@@ -1,0 +1,131 @@
+"""Resume identity: an interrupted and resumed run is the uninterrupted run, row for row.
+
+The checkpoint holds what the next step depends on (envs' simulators and generators, the
+collector's carrier, the n-step transform's held frames, every random stream, the epoch's
+partial statistics), so ``metrics.csv`` (timing aside) and ``final_eval.json`` are identical
+whether the run was stopped or not (docs/recipes.md, "Resume")."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import pytest
+
+from s3rl_torchrl.trainer import Trainer, train, train_seeds
+from s3rl_torchrl.trainer.metrics import read_metrics
+from s3rl_torchrl.trainer.multiseed import MultiSeedTrainer
+
+TIMING = ("eval/seconds",)
+
+
+def rows(run_dir):
+    return [{k: v for k, v in r.items() if k not in TIMING} for r in read_metrics(run_dir)]
+
+
+def final(run_dir):
+    return json.loads((run_dir / "final_eval.json").read_text())
+
+
+def sigterm_at_step(cls, step, monkeypatch):
+    """A real SIGTERM in the middle of the run's gradient steps (the handler stops the loop at
+    the next safe point and writes a checkpoint)."""
+    original = cls._gradient_step
+
+    def step_then_signal(self):
+        original(self)
+        lead = self.members[0] if hasattr(self, "members") else self
+        if lead.counters.grad_steps == step:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(cls, "_gradient_step", step_then_signal)
+
+
+def crash_after_epoch(epoch):
+    """A crash (as kill -9) after the checkpoint of ``epoch``: what it logged after that
+    checkpoint is dropped on resume."""
+
+    def callback(trainer, row):
+        if row["epoch"] == epoch + 1:
+            raise KeyboardInterrupt(f"simulated kill -9 after the checkpoint of epoch {epoch}")
+
+    return callback
+
+
+CASES = [
+    # (task, algo, interruption): each family on a velocity, a Goal and a Circle task.
+    ("SafetyHalfCheetahVelocity-v1", "sac_lag", "sigterm"),
+    ("SafetyHalfCheetahVelocity-v1", "ddpg_lag", "crash"),
+    ("SafetyHalfCheetahVelocity-v1", "ppo_lag", "sigterm"),
+    ("SafetyPointGoal1-v0", "s3rl", "crash"),
+    ("SafetyPointGoal1-v0", "ddpg_lag", "sigterm"),
+    ("SafetyPointGoal1-v0", "ppo_lag", "crash"),
+    ("SafetyPointCircle1-v0", "s3rl", "sigterm"),
+    ("SafetyPointCircle1-v0", "ddpg_lag", "sigterm"),
+    ("SafetyPointCircle1-v0", "ppo_lag", "crash"),
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task, algo, interruption", CASES)
+def test_resumed_run_is_the_uninterrupted_run(task, algo, interruption, tiny_config, tmp_path,
+                                              monkeypatch):
+    cfg = tiny_config(f"task={task}", f"algo={algo}", "collector.total_frames=800")
+    train(cfg, tmp_path / "full")
+    if interruption == "sigterm":
+        # Mid-epoch: between two gradient steps of the second epoch's batches.
+        with monkeypatch.context() as patch:
+            sigterm_at_step(Trainer, 37, patch)
+            part = train(cfg, tmp_path / "part")
+        assert part.status == "interrupted" and part.counters.epochs == 1
+    else:
+        with pytest.raises(KeyboardInterrupt):
+            train(cfg, tmp_path / "part", on_epoch_end=crash_after_epoch(2))
+    cfg.resume = str(tmp_path / "part")
+    resumed = train(cfg, tmp_path / "unused")
+    assert resumed.status == "finished"
+    assert rows(tmp_path / "part") == rows(tmp_path / "full")
+    assert final(tmp_path / "part") == final(tmp_path / "full")
+
+
+@pytest.mark.slow
+def test_resumed_group_is_the_uninterrupted_group(tiny_config, tmp_path, monkeypatch):
+    cfg = tiny_config("algo=s3rl", "seeds=[3,4]", "collector.total_frames=800")
+    train_seeds(cfg, tmp_path / "full")
+    with monkeypatch.context() as patch:
+        sigterm_at_step(MultiSeedTrainer, 70, patch)
+        assert train_seeds(cfg, tmp_path / "part").status == "interrupted"
+    cfg.resume = str(tmp_path / "part")
+    train_seeds(cfg, tmp_path / "unused")
+    for seed in (3, 4):
+        assert rows(tmp_path / f"part/seed{seed}") == rows(tmp_path / f"full/seed{seed}")
+        assert final(tmp_path / f"part/seed{seed}") == final(tmp_path / f"full/seed{seed}")
+
+
+def test_resuming_a_finished_run_keeps_its_final_evaluation(tiny_config, tmp_path, capsys):
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    train(cfg, tmp_path)
+    saved = (tmp_path / "final_eval.json").read_text()
+    cfg.resume = str(tmp_path)
+    again = train(cfg, tmp_path / "unused")
+    assert again.status == "finished"
+    assert (tmp_path / "final_eval.json").read_text() == saved
+    assert again.final_eval.reward_mean == json.loads(saved)["reward_mean"]
+    assert "not recomputed" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_a_bullet_run_says_its_resume_is_inexact(tiny_config, tmp_path, capsys):
+    pytest.importorskip("bullet_safety_gym")
+    cfg = tiny_config("task=SafetyBallRun-v0", "algo=sac_lag", "collector.total_frames=400")
+
+    def stop(trainer, row):
+        trainer.stop.requested = True
+
+    train(cfg, tmp_path, on_epoch_end=stop)
+    cfg.resume = str(tmp_path)
+    train(cfg, tmp_path / "unused")
+    assert "inexactly" in capsys.readouterr().out
+    resume = json.loads((tmp_path / "config.json").read_text())["resumes"][-1]
+    assert resume["exact"] is False and "pybullet" in resume["inexact_reason"]
