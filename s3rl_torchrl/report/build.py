@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
 from s3rl_torchrl.report.runs import (
     PROTOCOLS,
@@ -343,6 +345,42 @@ def export_embedding_panels(
     return stored
 
 
+def _critic_table(groups: Sequence[RunGroup]) -> list[str]:
+    """One row per group: how often the cost critic was below 0 and how far off it was, the
+    largest alpha, and the cost term's share of the actor gradient over the last 20% of
+    epochs; means over seeds."""
+    lines = [
+        "| task | algo | epochs with cost Q < 0 | cost Q - cost return (last 20%) | "
+        "max alpha | cost share of the actor gradient (last 20%) |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+
+    def tail(values: list[float]) -> list[float]:
+        values = [v for v in values if not math.isnan(v)]
+        return values[-max(1, len(values) // 5):] if values else []
+
+    for group in groups:
+        negative, bias, alpha, share = [], [], [], []
+        for run in group.runs:
+            rows = run.metrics
+            cost_q = [r.get("critic/cost_q", math.nan) for r in rows]
+            known = [v for v in cost_q if not math.isnan(v)]
+            negative.append(sum(v < 0 for v in known) / len(known) if known else math.nan)
+            bias += tail([r.get("critic/cost_error", math.nan) for r in rows])
+            alpha += [r.get("train/alpha", math.nan) for r in rows]
+            share += tail([r.get("grad/cost_share", math.nan) for r in rows])
+
+        def fmt(values: list[float], spec: str, reduce=np.mean) -> str:
+            values = [v for v in values if not math.isnan(v)]
+            return format(float(reduce(values)), spec) if values else "-"
+
+        lines.append(
+            f"| {group.task} | {group.label} | {fmt(negative, '.0%')} | {fmt(bias, '.2f')} | "
+            f"{fmt(alpha, '.3g', np.max)} | {fmt(share, '.2f')} |"
+        )
+    return lines
+
+
 def build_report(
     root: str | Path,
     out: str | Path | None = None,
@@ -478,6 +516,28 @@ def build_report(
         "![Figure 2](figure2_learning_curves.png)",
         "",
     ]
+    diagnosed = [g for g in groups if any("critic/cost_q" in r.metrics[0] for r in g.runs
+                                          if r.metrics)]
+    if diagnosed:
+        diagnosed_by_task = {
+            task: [g for g in task_groups if g in diagnosed]
+            for task, task_groups in by_task.items()
+        }
+        diagnosed_by_task = {t: gs for t, gs in diagnosed_by_task.items() if gs}
+        report.figures += figures.critic_diagnostics(diagnosed_by_task, out, reference)
+        lines += [
+            "## Critic diagnostics",
+            "",
+            "Per epoch (`critic/*`, `grad/*` and `train/alpha` of `metrics.csv`): the cost and "
+            "reward critics at the steps of the last 10 finished training episodes against the "
+            "discounted returns that followed them, alpha, and the share of the actor's gradient "
+            "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\").",
+            "",
+            *_critic_table(diagnosed),
+            "",
+            "![Critic diagnostics](critic_diagnostics.png)",
+            "",
+        ]
     if finished:
         report.figures += figures.safe_occupancy_bars(by_task, out, reference)
         lines += [

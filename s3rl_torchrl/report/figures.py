@@ -18,7 +18,13 @@ from s3rl_torchrl.report.stats import learning_curve, summarize
 if TYPE_CHECKING:  # the panels' type; importing it at run time would pull in torch
     from s3rl_torchrl.report.embeddings import EmbeddingPanel
 
-__all__ = ["learning_curves", "safe_occupancy_bars", "embedding_tsne", "FORMATS"]
+__all__ = [
+    "FORMATS",
+    "critic_diagnostics",
+    "embedding_tsne",
+    "learning_curves",
+    "safe_occupancy_bars",
+]
 
 FORMATS = ("png", "svg")
 SAFE_COLOUR, UNSAFE_COLOUR = "#2ca02c", "#d62728"
@@ -133,6 +139,63 @@ def learning_curves(
     fig.suptitle("Learning curves (deterministic evaluation; mean ± std over seeds)")
     fig.tight_layout()
     paths = _save(fig, out_dir, "figure2_learning_curves")
+    plt.close(fig)
+    return paths
+
+
+#: The rows of the critic-diagnostics figure: (y label, [(column, line style), ...], log scale);
+#: dashed: the discounted return that followed the steps the critic is read at.
+CRITIC_PANELS = (
+    ("cost critic Q_c", [("critic/cost_q", "-"), ("critic/cost_return", "--")], False),
+    ("reward critic Q_r (soft)", [("critic/reward_q", "-"), ("critic/reward_return", "--")],
+     False),
+    ("alpha", [("train/alpha", "-")], True),
+    ("cost share of |grad|", [("grad/cost_share", "-")], False),
+)
+
+
+def critic_diagnostics(
+    by_task: Mapping[str, Sequence[RunGroup]], out_dir: Path, reference: str = "s3rl"
+) -> list[Path]:
+    """The critics' health per epoch (diagnostics/critics.py columns of ``metrics.csv``): the
+    cost and reward critics at the last finished training episodes' steps against the
+    discounted returns that followed, alpha, and the share of the actor's gradient norm that
+    comes from the cost term, ``|g_cost| / (|g_reward| + |g_entropy| + |g_cost|)``. One column
+    per task, mean over seeds. A cost critic below 0 or a gradient share stuck at 1 shows."""
+    plt = _pyplot()
+    tasks = list(by_task)
+    labels = sorted({g.label for groups in by_task.values() for g in groups})
+    fig, axes = plt.subplots(
+        len(CRITIC_PANELS), len(tasks), figsize=(6.0 * len(tasks), 11.0), squeeze=False,
+        sharex="col",
+    )
+    colours = _colours(labels, reference)
+    for col, task in enumerate(tasks):
+        for group in _ordered(by_task[task], reference):
+            colour = colours[group.label]
+            for row, (_, columns, _log) in enumerate(CRITIC_PANELS):
+                for column, style in columns:
+                    frames, mean, _ = learning_curve(group, column)
+                    if not len(frames):
+                        continue
+                    label = f"{group.label} ({len(group.runs)} seeds)" if style == "-" else None
+                    axes[row, col].plot(frames, mean, style, color=colour, label=label)
+        axes[0, col].set_title(task, fontsize=10)
+        for row, (label, _, log) in enumerate(CRITIC_PANELS):
+            ax = axes[row, col]
+            ax.set_ylabel(label, fontsize=8)
+            if log:
+                ax.set_yscale("log")
+            if row < 2:
+                ax.axhline(0.0, color="black", lw=0.8)
+            ax.grid(alpha=0.3)
+        axes[-1, col].set_ylim(-0.02, 1.02)
+        axes[-1, col].set_xlabel("environment steps")
+        axes[-1, col].xaxis.set_major_formatter(_frames_formatter())
+        axes[-1, col].legend(fontsize=7, loc="lower right")
+    fig.suptitle("Critic diagnostics (mean over seeds; dashed: the returns that followed)")
+    fig.tight_layout()
+    paths = _save(fig, out_dir, "critic_diagnostics")
     plt.close(fig)
     return paths
 

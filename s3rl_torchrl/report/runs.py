@@ -163,10 +163,26 @@ def under_protocol(group: RunGroup, protocol: str) -> RunGroup | None:
 
 def _read_metrics(path: Path) -> list[dict[str, float]]:
     with path.open(newline="") as f:
-        return [
+        rows = [
             {k: float(v) if v not in ("", None) else math.nan for k, v in row.items()}
             for row in csv.DictReader(f)
         ]
+    for row in rows:
+        _add_cost_share(row)
+    return rows
+
+
+GRADIENT_TERMS = ("grad/reward", "grad/entropy", "grad/cost")
+
+
+def _add_cost_share(row: dict[str, float]) -> None:
+    """``grad/cost_share``: the cost term's part of the actor's gradient norms (the critic
+    diagnostics' ``grad/*`` columns), NaN where a term is missing or all are 0."""
+    if not all(name in row for name in GRADIENT_TERMS):
+        return
+    norms = [row[name] for name in GRADIENT_TERMS]
+    total = sum(norms)
+    row["grad/cost_share"] = norms[2] / total if total > 0 else math.nan
 
 
 def read_run(path: str | Path) -> Run:
