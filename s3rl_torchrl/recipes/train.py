@@ -6,6 +6,7 @@
     s3rl-train resume=outputs/s3rl/.../<run>    # continue a run with its own config
     s3rl-train resume=<run> collector.total_frames=2000000   # ... with a change (printed, recorded)
     s3rl-train 'seeds=[10,20,30,40,50]'         # five seeds in one process, one batched update
+    s3rl-train -m ... hydra.sweep.dir=runs/x resume=auto   # start each job, or continue it
 
 The loop lives in :mod:`s3rl_torchrl.trainer`; this file only parses and validates the config.
 A rejected config leaves no run directory behind; a run's ``train.log`` holds what it printed
@@ -32,6 +33,7 @@ from s3rl_torchrl.trainer import (
     train_seeds,
     validate,
 )
+from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, resolve_checkpoint
 from s3rl_torchrl.trainer.resume import resume_config
 
 CONFIG_DIR = str(config_dir())
@@ -48,6 +50,19 @@ def reject(err: Exception, output: HydraOutput) -> NoReturn:
         with console_to_log(__name__) as log:
             log.error("s3rl-train: %s", err)
     sys.exit(2)
+
+
+def holds_run(run_dir: str) -> bool:
+    """Whether ``run_dir`` holds a run to continue (a checkpoint, or a multi-seed group)."""
+    from pathlib import Path
+
+    if (Path(run_dir) / GROUP_FILE).is_file():
+        return True
+    try:
+        resolve_checkpoint(run_dir)
+    except CheckpointError:
+        return False
+    return True
 
 
 def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:
@@ -73,8 +88,18 @@ def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train")
 def _main(cfg: DictConfig) -> float:
     output = HydraOutput.current()  # before anything writes into the run directory
+    # resume=auto: this command's run directory (a fixed hydra.run.dir, or a sweep's job
+    # directory) is continued if it holds a run, started otherwise; the composed config must
+    # then match the saved one where a resume cannot change it (the same command does).
+    auto = cfg.resume == "auto"
+    if auto:
+        cfg.resume = None
     try:
-        if cfg.resume:
+        if auto:
+            train_cfg = validate(cfg)
+            if holds_run(output.dir):
+                train_cfg.resume = str(output.dir)
+        elif cfg.resume:
             # The run's own config; the other overrides of this command are its changes.
             changes = [o for o in HydraConfig.get().overrides.task if not o.startswith("resume=")]
             train_cfg = resume_config(cfg.resume, changes)

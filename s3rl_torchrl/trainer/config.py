@@ -463,7 +463,7 @@ class TrainConfig:
     # torch.compile of the loss (the package's ReLU keeps it fast on CPU, docs/objectives.md).
     compile: bool = True
     save_interval: int = 4  # epochs between checkpoints (and one at the end)
-    resume: str | None = None  # a run directory to continue
+    resume: str | None = None  # a run directory to continue; "auto" (recipe): its own, if any
 
     def check(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
@@ -556,7 +556,7 @@ def hydra_run_dir(resume: str | None, algo: str, task: str, seeds: str, now: str
     """Where ``s3rl-train`` runs: ``outputs/<algo>/<task>/<seed10 | seeds10-20>/<time>``, or,
     for a resume, ``<run>/resumes/<time>`` (that invocation's Hydra files and log, beside the
     run it continues); ``${s3rl_run_dir:...}`` in configs/train.yaml."""
-    if resume:
+    if resume and resume != "auto":  # resume=auto runs in the command's own directory
         return str(Path(resume).expanduser() / "resumes" / now)
     return f"outputs/{algo}/{task}/{seeds}/{now}"
 

@@ -31,3 +31,39 @@ def test_skips_are_explained_with_the_runs_batch_size():
         contrastive_summary(cfg, result(0, 1))
     )
     assert contrastive_summary(cfg, result(5, 0)) == "Contrastive phases: 5 ran, 0 skipped."
+
+
+def _train(*args: str, cwd: Path):
+    import subprocess
+    import sys
+
+    cli = str(Path(sys.executable).with_name("s3rl-train"))
+    return subprocess.run([cli, *args], cwd=cwd, capture_output=True, text=True, timeout=600)
+
+
+def test_resume_auto_starts_then_continues_each_job_of_a_sweep(tmp_path):
+    # The evidence workflow: the same multirun command, run again after an interruption,
+    # continues each job in its own directory (here: both jobs had finished, so their final
+    # evaluations stand and nothing is retrained).
+    sweep = tmp_path / "sweep"
+    args = ["-m", "experiment=tiny", "algo=sac", "seed=1,2", "collector.total_frames=200",
+            f"hydra.sweep.dir={sweep}", "hydra.sweep.subdir=seed${seed}", "resume=auto"]
+    first = _train(*args, cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    saved = {s: (sweep / f"seed{s}" / "final_eval.json").read_text() for s in (1, 2)}
+    again = _train(*args, cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.count("not recomputed") == 2
+    assert {s: (sweep / f"seed{s}" / "final_eval.json").read_text() for s in (1, 2)} == saved
+
+
+def test_resume_alone_refuses_a_new_seed_or_a_config_group(tmp_path):
+    run = tmp_path / "run"
+    done = _train("experiment=tiny", "algo=sac", "collector.total_frames=200",
+                  f"hydra.run.dir={run}", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    seed = _train(f"resume={run}", "seed=3", cwd=tmp_path)
+    assert seed.returncode == 2 and "seed: the run has 10, the override gives 3" in seed.stderr
+    group = _train(f"resume={run}", "experiment=safe", cwd=tmp_path)
+    assert group.returncode == 2 and "experiment would replace a whole config group" in group.stderr
+    assert not (run / "resumes").exists() or not any((run / "resumes").iterdir())

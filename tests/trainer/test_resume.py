@@ -129,3 +129,34 @@ def test_a_bullet_run_says_its_resume_is_inexact(tiny_config, tmp_path, capsys):
     assert "inexactly" in capsys.readouterr().out
     resume = json.loads((tmp_path / "config.json").read_text())["resumes"][-1]
     assert resume["exact"] is False and "pybullet" in resume["inexact_reason"]
+
+
+@pytest.mark.slow
+def test_kill_9_after_a_checkpoint_then_resume_alone_is_the_uninterrupted_run(tmp_path):
+    # Through the command line, as a user does: the run is killed (SIGKILL: no handler runs)
+    # once it has checkpointed, then `s3rl-train resume=<run>` alone continues it.
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    train_cli = str(Path(sys.executable).with_name("s3rl-train"))
+    args = ["experiment=tiny", "algo=sac_lag", "task=SafetyHopperVelocity-v1",
+            "collector.total_frames=1000", "logger.progress_bar=false"]
+    full, part = tmp_path / "full", tmp_path / "part"
+    subprocess.run([train_cli, *args, f"hydra.run.dir={full}"], check=True, capture_output=True)
+    process = subprocess.Popen([train_cli, *args, f"hydra.run.dir={part}"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    manifest = part / "checkpoints" / "latest" / "manifest.json"
+    deadline = time.monotonic() + 300
+    while process.poll() is None and time.monotonic() < deadline:
+        if manifest.is_file() and len(read_metrics(part)) >= 2:
+            break
+        time.sleep(0.05)
+    process.kill()
+    process.wait()
+    assert not (part / "final_eval.json").exists(), "the run ended before it was killed"
+    done = subprocess.run([train_cli, f"resume={part}"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert rows(part) == rows(full)
+    assert final(part) == final(full)
