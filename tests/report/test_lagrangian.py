@@ -1,18 +1,17 @@
-"""benchmarks/lagrangian_dynamics.py: second-half statistics against a hand-made run, and a
-launch of two tiny runs end to end."""
+"""s3rl-report lagrangian (report/lagrangian.py): second-half statistics against hand-made runs,
+the table, the copied CSVs, the figure and the command line."""
 
 from __future__ import annotations
 
 import csv
 import json
 import math
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-import lagrangian_dynamics as ld  # noqa: E402
+from s3rl_torchrl.report import lagrangian as ld
+from s3rl_torchrl.report.cli import main
 
 COLUMNS = ["frames", "epoch", "train/reward", "train/cost", "lagrangian"]
 COLUMNS += ["eval/reward", "eval/cost"]
@@ -136,63 +135,6 @@ def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
     assert math.isnan(s["final_reward"]) and math.isnan(s["final_cost"])
 
 
-def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
-    args = ["launch", "--experiment", "tiny", "--settings", "pid_ema", "--seeds", "1", "2"]
-    args += ["--frames", "400", "--group", "--no-compile", "--runs-dir", str(tmp_path / "runs")]
-    args += ["--algo", "s3rl"]
-    report = ld.main(args)
-    (row,) = report["settings"]
-    assert row["algo"] == "s3rl" and row["seeds"] == [1, 2] and row["frames"] == 400
-    assert row["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
-    # Any algo but SAC-Lag gets its own level, so its groups never resume SAC-Lag's.
-    group = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "s3rl" / "pid_ema"
-    assert (group / "seeds.json").is_file()
-    for seed in (1, 2):
-        config = json.loads((group / f"seed{seed}" / "config.json").read_text())
-        assert config["seed"] == seed and config["algo"]["pid"]["ema_alpha"] == 0.95
-        assert config["algo"]["name"] == "s3rl"
-        assert (group / f"seed{seed}" / "final_eval.json").is_file()
-    launched = capsys.readouterr().out
-    assert launched.count("launch:") == 1 and "seeds=[1,2]" in launched
-    ld.main(args)  # finished: nothing is launched again
-    assert "launch:" not in capsys.readouterr().out
-
-
-def test_launch_two_settings_of_tiny_runs_then_skip_them(tmp_path, capsys):
-    args = ["launch", "--experiment", "tiny", "--settings", "fsrl", "pid_ema", "--seeds", "1"]
-    args += ["--frames", "400", "--no-compile", "--jobs", "2", "--runs-dir", str(tmp_path / "runs")]
-    report = ld.main([*args, "--csv-dir", str(tmp_path / "csv")])
-    fsrl, ema = sorted(report["settings"], key=lambda r: "ema" in r["setting"])
-    assert fsrl["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) batch=100"
-    assert ema["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
-    for row in (fsrl, ema):
-        assert row["frames"] == 400 and row["seeds"] == [1]
-        assert not math.isnan(row["eval_reward"]) and not math.isnan(row["final_reward"])
-    copies = sorted(p.relative_to(tmp_path / "csv") for p in (tmp_path / "csv").rglob("*.csv"))
-    assert len(copies) == 2 and all(p.name == "seed1.csv" for p in copies)
-    run_dir = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "pid_ema" / "seed1"
-    config = json.loads((run_dir / "config.json").read_text())
-    assert config["algo"]["pid"]["ema_alpha"] == 0.95 and config["algo"]["name"] == "sac_lag"
-    capsys.readouterr()
-    ld.main(args)  # both finished: nothing is launched again
-    assert "launch:" not in capsys.readouterr().out
-
-
-def test_plant_mode_builds_the_configured_controllers(tmp_path):
-    report = ld.main(["plant", "--noise", "0", "--seeds", "0", "--updates", "4"])
-    rows = {r["setting"]: r for r in report["settings"]}
-    # By hand (tests/objectives/test_lagrangian.py): FSRL's form from J = 900, 0, 900, 0 ...
-    assert rows["fsrl"]["first_lambdas_seed0"] == [133.945, 0.0, 135.385, 0.38]
-    # ... pid=ema's first update 0.05 * 44.5 + 0.0005 * 890 + 0.1 * 44.5; Adam's first steps = lr
-    assert rows["pid_ema"]["first_lambdas_seed0"][0] == pytest.approx(7.12)
-    # ... the same with ki = 0.01: 0.05 * 44.5 + 0.01 * 890 + 0.1 * 44.5
-    assert rows["pid_ema_ki0.01"]["first_lambdas_seed0"][0] == pytest.approx(15.575)
-    assert rows["learned"]["first_lambdas_seed0"][:2] == pytest.approx([0.005, 0.01], abs=1e-6)
-    assert rows["learned_lr0.05"]["first_lambdas_seed0"][0] == pytest.approx(0.05, abs=1e-6)
-    # Second half (updates 3, 4): J = 900 then 0 for FSRL, over the limit once in two.
-    assert rows["fsrl"]["cost_over_limit"] == 0.5
-
-
 def test_algos_with_the_same_controller_are_summarised_apart(tmp_path):
     rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
     sac_lag = fake_run(tmp_path / "sac_lag", 10, rows, [(20000, 0.0), (40000, 9.0)])
@@ -235,20 +177,25 @@ def test_plot_has_a_pair_of_rows_per_setting_and_a_column_per_seed(tmp_path):
     ]
 
 
-@pytest.mark.parametrize("experiment", ["paper", "safe"])
-def test_every_setting_composes_to_the_controller_it_names(experiment):
-    """pid=... sets only the PID's gains and experiment=safe picks the learned multiplier, so a
-    PID setting that does not name its controller would run `learned` under --experiment safe
-    (two settings, one controller)."""
-    from hydra import compose, initialize_config_dir
+def test_the_subcommand_writes_the_summary_with_its_command(tmp_path, capsys):
+    rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
+    run = fake_run(tmp_path / "runs", 10, rows, [(20000, 0.0), (40000, 9.0)])
+    argv = ["lagrangian", str(run), str(tmp_path / "not_a_run"), "--out", str(tmp_path / "l.json"),
+            "--csv-dir", str(tmp_path / "csv"), "--until", "40000"]
+    assert main(argv) == 0
+    saved = json.loads((tmp_path / "l.json").read_text())
+    assert saved["command"] == "s3rl-report " + " ".join(argv)
+    assert list(saved) == ["command", "machine", "runs", "settings"]
+    assert saved["settings"][0]["seeds"] == [10] and saved["runs"][0]["frames"] == 40000
+    assert len(list((tmp_path / "csv").rglob("seed10.csv"))) == 1
+    out = capsys.readouterr()
+    assert out.out.startswith("| task | algo | setting |") and "skipping" in out.err
 
-    from s3rl_torchrl.trainer import register_configs, validate
 
-    register_configs()
-    with initialize_config_dir(config_dir=str(ld.REPO / "configs"), version_base="1.3"):
-        for name, overrides in ld.SETTINGS.items():
-            cfg = validate(compose(config_name="train", overrides=[
-                f"experiment={experiment}", "algo=sac_lag", *ld.BASE_OVERRIDES, *overrides,
-            ]))
-            expected = "learned" if "learned" in name else "pid"
-            assert cfg.algo.lagrangian == expected, name
+def test_a_report_of_a_directory_named_like_a_subcommand_is_written_with_a_path(tmp_path):
+    from s3rl_torchrl.report.cli import SUBCOMMANDS, parse_args
+
+    assert set(SUBCOMMANDS) == {"lagrangian", "compare-runs"}
+    # The report's own arguments are as before: RUNS first, then its options.
+    args = parse_args(["./lagrangian", "--out", str(tmp_path)])
+    assert (args.runs, args.out) == ("./lagrangian", str(tmp_path))
