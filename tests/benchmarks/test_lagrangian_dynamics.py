@@ -1,7 +1,7 @@
 """benchmarks/studies/lagrangian_dynamics.py: a launch of tiny runs end to end (alone and as a
 group of seeds in one process), the controllers on the synthetic plant, and every setting
 composing to the controller it names. Its statistics are s3rl-report lagrangian's
-(tests/report/test_lagrangian.py)."""
+(tests/report/test_lagrangian_summary.py)."""
 
 from __future__ import annotations
 
