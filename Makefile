@@ -48,8 +48,10 @@ test: $(STAMP) lint
 test-fast: $(STAMP) lint
 	$(BIN)/python -m pytest -q -n $(WORKERS) -m "not slow" $(ARGS)
 
+# The standing benchmarks in one table (benchmarks/run.py, docs/benchmarks.md; minutes), into
+# benchmarks/results/standing/<date>.json. A subset or a smoke run: make bench ARGS="sampler --quick"
 bench: $(STAMP)
-	$(BIN)/python benchmarks/env_throughput.py
+	$(BIN)/python benchmarks/run.py $(ARGS)
 
 # S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
 GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
@@ -61,14 +63,14 @@ BINARY = s3rl (algo.contrastive_cfg.label=binary)
 # experiment=safe runs (SafetyPointGoal1, graded labels).
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
-	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/reproduction/*/seed* \
+	$(BIN)/s3rl-report lagrangian results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
 	$(BIN)/s3rl-report results/safe --out docs/safe
-	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/safe/*/seed* \
+	$(BIN)/s3rl-report lagrangian results/safe/*/seed* \
 		--out docs/safe/lagrangian.json --plot docs/safe/lagrangian.png
 	$(BIN)/s3rl-report results/safe_300k --out docs/safe_300k \
 		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
-	$(BIN)/python benchmarks/lagrangian_dynamics.py summarise results/safe_300k/*/seed* \
+	$(BIN)/s3rl-report lagrangian results/safe_300k/*/seed* \
 		--out docs/safe_300k/lagrangian.json --plot docs/safe_300k/lagrangian.png
 	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
 		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac

@@ -1,8 +1,10 @@
 """What every benchmark script shares: the config of a measured recipe run, interleaved timing
-rounds, and its results as JSON with the command that made them."""
+rounds, and its results as JSON with the command that made them, by default in the archive
+of the day (``benchmarks/results/archive/<date>/<name>.json``)."""
 
 from __future__ import annotations
 
+import datetime
 import json
 import platform
 import sys
@@ -11,6 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import torch
+
+RESULTS = Path(__file__).resolve().parent / "results"
 
 # What a measured recipe run leaves out: logging, checkpoints, long evaluations.
 MEASURED_RUN = [
@@ -33,6 +37,13 @@ def recipe_config(*overrides: str):
     register_configs()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         return validate(compose(config_name="train", overrides=[*MEASURED_RUN, *overrides]))
+
+
+def archive_path(name: str) -> Path:
+    """Where a script writes its results unless ``--out`` says otherwise:
+    ``benchmarks/results/archive/<today>/<name>.json`` (the harness's tables go to
+    ``benchmarks/results/standing/``, run.py)."""
+    return RESULTS / "archive" / datetime.date.today().isoformat() / f"{name}.json"
 
 
 def command_line() -> str:

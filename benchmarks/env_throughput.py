@@ -1,11 +1,11 @@
 """Env steps per second: raw Gymnasium vs ``make_env`` with 1 and 10 copies.
 
-    python benchmarks/env_throughput.py [--frames 5000] [--tasks ...] [--out benchmarks/results/env_throughput.json]
+    python benchmarks/env_throughput.py [--frames 5000] [--tasks ...] [--out benchmarks/results/archive/<date>/env_throughput.json]
     python benchmarks/env_throughput.py --family bullet circle --batchings sync_vector \
-        --out benchmarks/results/env_throughput_bullet_circle.json
+        --out benchmarks/results/archive/<date>/env_throughput_bullet_circle.json
     python benchmarks/env_throughput.py --family goal circle --tasks SafetyHalfCheetahVelocity-v1 \
         --batchings sync_vector --clock cpu --oracle-python /work/oracle-venv/bin/python \
-        --out benchmarks/results/env_throughput_goal.json
+        --out benchmarks/results/archive/<date>/env_throughput_goal.json
 
 Random actions; a "step" is one transition of one env copy (frames). ``--clock cpu`` times with
 the process's CPU time instead of wall time: on a shared machine it drops the time other
@@ -30,7 +30,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-from _report import write_report
+from _report import archive_path, write_report
 
 import s3rl_torchrl  # noqa: F401  (registers the tasks)
 from s3rl_torchrl.envs import get_task, make_env, require_task_module, task_names
@@ -89,7 +89,7 @@ def main() -> None:
     parser.add_argument("--family", nargs="*", default=[],
                         help="every main id of these families (velocity, bullet, circle, goal)")
     parser.add_argument("--batchings", nargs="*", default=["sync_vector", "serial", "async_vector", "parallel"])
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/env_throughput.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("env_throughput"))
     parser.add_argument("--clock", choices=["wall", "cpu"], default="wall")
     parser.add_argument("--oracle-python", default=None,
                         help="interpreter of the Safety-Gymnasium 1.0.0 oracle venv: adds its own "

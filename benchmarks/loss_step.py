@@ -2,7 +2,7 @@
 
     python benchmarks/loss_step.py [--steps 20] [--rounds 9] [--threads 1] \
         [--envs halfcheetah humanoid] [--modes eager compile] \
-        [--out benchmarks/results/loss_step.json]
+        [--out benchmarks/results/archive/<date>/loss_step.json]
 
 Batch 256; actor ``build_s3rl_actor`` (128x128); critics ``build_qvalue_network`` (128x128): a
 double reward critic and, for SAC-Lag, one double cost critic (one cost, lambda = 0.3). Adam
@@ -41,7 +41,7 @@ import time
 from pathlib import Path
 
 import torch
-from _report import write_report
+from _report import archive_path, write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.objectives import SACLoss
@@ -256,7 +256,7 @@ def main() -> None:
         choices=list(VARIANTS),
         help="variants timed in compile mode",
     )
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/loss_step.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("loss_step"))
     args = parser.parse_args()
 
     load_before = os.getloadavg()

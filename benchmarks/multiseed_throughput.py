@@ -2,7 +2,7 @@
 
     python benchmarks/multiseed_throughput.py [--frames 10000] [--ks 1 2 5] [--modes eager compiled]
         [--threads 1] [--task SafetyHalfCheetahVelocity-v1] [--frames-per-batch 10000]
-        [--side-by-side 2] [--out benchmarks/results/multiseed_throughput.json]
+        [--side-by-side 2] [--out benchmarks/results/archive/<date>/multiseed_throughput.json]
     python benchmarks/multiseed_throughput.py --step-only [--ks 1 2 5 10] [--modes eager compiled]
     python benchmarks/multiseed_throughput.py --floor [--ks 1 5] [--threads 2] [--frames 4000]
     python benchmarks/multiseed_throughput.py --breakdown [--ks 1 5] [--threads 2] [--frames 4000]
@@ -50,7 +50,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import interleaved_rounds, recipe_config, write_report
+from _report import archive_path, interleaved_rounds, recipe_config, write_report
 
 from s3rl_torchrl.trainer import MultiSeedTrainer, Trainer
 
@@ -64,9 +64,18 @@ def warmup_frames(batch: int) -> int:
 
 
 def paper_config(
-    task: str, frames: int, compiled: bool, threads: int, seeds: list[int] | None, batch: int
+    task: str,
+    frames: int,
+    compiled: bool,
+    threads: int,
+    seeds: list[int] | None,
+    batch: int,
+    warmup: int | None = None,
 ):
-    warmup = warmup_frames(batch)
+    """``experiment=paper`` in collects of ``batch`` frames, ``frames`` measured frames after
+    ``warmup`` random ones (default :func:`warmup_frames`; the harness's quick size passes a
+    few hundred)."""
+    warmup = warmup_frames(batch) if warmup is None else warmup
     overrides = [
         "experiment=paper",
         f"collector.frames_per_batch={batch}",
@@ -114,11 +123,18 @@ def env_rows(cfg, env, rows: int):
 
 
 def measure_recipe(
-    task: str, frames: int, compiled: bool, threads: int, k: int | None, batch: int
+    task: str,
+    frames: int,
+    compiled: bool,
+    threads: int,
+    k: int | None,
+    batch: int,
+    warmup: int | None = None,
 ) -> dict:
     """One run; ``k=None``: the single-seed recipe, else ``MultiSeedTrainer`` with k seeds."""
     seeds = None if k is None else group_seeds(k)
-    cfg = paper_config(task, frames, compiled, threads, seeds, batch)
+    cfg = paper_config(task, frames, compiled, threads, seeds, batch, warmup)
+    warmup = cfg.collector.init_random_frames
     marks: dict[int, list[tuple[float, float]]] = {}  # frames -> [(time, eval seconds)]
 
     def on_epoch_end(trainer, row):
@@ -144,7 +160,6 @@ def measure_recipe(
     # From the end of the epoch that closes the warm-up (every seed evaluated; it holds the
     # first batch's gradient steps) to the end of the last one.
     last = max(marks)
-    warmup = warmup_frames(batch)
     (t0, cpu0, _), (t1, cpu1, _) = marks[warmup][-1], marks[last][-1]
     eval_seconds = sum(e for f in marks if f > warmup for _, _, e in marks[f])
     seconds = t1 - t0 - eval_seconds
@@ -251,13 +266,13 @@ BREAKDOWN_PARTS = ("collect", "store", "sample", "noise and stacking", "update",
 
 
 def measure_breakdown(task: str, frames: int, threads: int, k: int | None, batch: int,
-                      compiled: bool = True) -> dict:
+                      compiled: bool = True, warmup: int | None = None) -> dict:
     """One ``MultiSeedTrainer`` run with k seeds (``k=None``: the single-seed ``Trainer``, the
     recipe without ``seeds``), its measured stretch split in parts (wall seconds), by wrapping
     the trainer's methods in timers."""
     cfg = paper_config(task, frames, compiled, threads, None if k is None else group_seeds(k),
-                       batch)
-    warmup = warmup_frames(batch)
+                       batch, warmup)
+    warmup = cfg.collector.init_random_frames
     spent = dict.fromkeys([*BREAKDOWN_PARTS, "gradient step"], 0.0)
     start: dict[str, float] = {}
 
@@ -380,19 +395,26 @@ def record_matmuls(task: str, threads: int) -> tuple[list[dict], float]:
     return recorder.calls, recorder.flops
 
 
-def gemm_rate(shape: tuple[int, int, int], threads: int) -> float:
-    """GFLOP/s of one ``[m, k] x [k, n]`` product, median of 7 rounds."""
+def gemm_rate(shape: tuple[int, int, int], threads: int, rounds: int = 7) -> float:
+    """GFLOP/s of one ``[m, k] x [k, n]`` product, median of ``rounds`` rounds."""
     import torch
 
     torch.set_num_threads(threads)
     m, k, n = shape
     a, b = torch.randn(m, k), torch.randn(k, n)
     calls = max(5, int(2e9 / (2 * m * k * n)))  # ~2 GFLOP per round
-    times = interleaved_rounds({"gemm": lambda: a @ b}, calls=calls, rounds=7, warmup=3)["gemm"]
+    times = interleaved_rounds({"gemm": lambda: a @ b}, calls=calls, rounds=rounds,
+                               warmup=3)["gemm"]
     return 2 * m * k * n / (statistics.median(times) / 1e6) / 1e9
 
 
-def measure_floor(ks: list[int], threads: int, task: str) -> tuple[list[dict], dict]:
+# The three shapes whose best GEMM rate is the floor's rate: the step's main product, five
+# times it, a large square.
+GEMM_SHAPES = ((256, 128, 128), (1280, 128, 128), (2048, 2048, 2048))
+
+
+def measure_floor(ks: list[int], threads: int, task: str, calls_per_round: int = 20,
+                  rounds: int = 7, gemm_shapes=GEMM_SHAPES) -> tuple[list[dict], dict]:
     """The step's matrix products for K seeds: counted, timed as plain ops at their own shapes
     (each K times larger along its batch dimension, as ``vmap`` makes them), and the best GEMM
     rate torch reaches here over three shapes (the step's main one, five times it, a large
@@ -416,9 +438,9 @@ def measure_floor(ks: list[int], threads: int, task: str) -> tuple[list[dict], d
                 torch.matmul(a, b)
 
         cases[f"K={k}"] = products
-    wall = interleaved_rounds(cases, calls=20, rounds=7, warmup=5)
-    peak = {f"{m}x{k}x{n}": round(gemm_rate((m, k, n), threads), 1)
-            for m, k, n in [(256, 128, 128), (1280, 128, 128), (2048, 2048, 2048)]}
+    wall = interleaved_rounds(cases, calls=calls_per_round, rounds=rounds, warmup=5)
+    peak = {f"{m}x{k}x{n}": round(gemm_rate((m, k, n), threads, rounds), 1)
+            for m, k, n in gemm_shapes}
     best = max(peak.values())
     rows = []
     for k in ks:
@@ -475,7 +497,7 @@ def main() -> None:
             for row in measure_steps(args.ks, mode == "compiled", args.threads, args.task):
                 print(json.dumps(row), flush=True)
                 rows.append(row)
-        out = args.out or Path("benchmarks/results/multiseed_step.json")
+        out = args.out or archive_path("multiseed_step")
         write_report(out, {"rows": rows})
         return
     def child(mode: str, k: str, threads: int) -> list[str]:
@@ -493,7 +515,7 @@ def main() -> None:
                                         capture_output=True, text=True, check=True).stdout)
             print(json.dumps(row), flush=True)
             rows.append(row)
-        out = args.out or Path("benchmarks/results/multiseed_breakdown.json")
+        out = args.out or archive_path("multiseed_breakdown")
         write_report(out, {"rows": rows})
         return
     if args.floor:
@@ -531,7 +553,7 @@ def main() -> None:
         for row in rows:
             print(json.dumps(row), flush=True)
         print(json.dumps(summary), flush=True)
-        out = args.out or Path("benchmarks/results/multiseed_floor.json")
+        out = args.out or archive_path("multiseed_floor")
         write_report(out, {"rows": rows, "summary": summary})
         return
 
@@ -572,7 +594,7 @@ def main() -> None:
             }
             print(json.dumps(row), flush=True)
             rows.append(row)
-    out = args.out or Path("benchmarks/results/multiseed_throughput.json")
+    out = args.out or archive_path("multiseed_throughput")
     write_report(out, {"rows": rows})
 
 

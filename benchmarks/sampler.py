@@ -2,7 +2,7 @@
 
     python benchmarks/sampler.py [--sizes 10000 100000 1000000] [--triplets 256] \
         [--unsafe 0.2] [--calls 300] [--rounds 5] [--threads 1] [--infonce-threads 1 2] \
-        [--out benchmarks/results/sampler.json]
+        [--out benchmarks/results/archive/<date>/sampler.json]
 
 For each buffer size N a ``TensorDictReplayBuffer(LazyTensorStorage(N), SafeUnsafeSampler())``
 is filled with N HalfCheetah-shaped transitions (observation 17, action 6, reward, cost, flags;
@@ -34,13 +34,14 @@ import time
 from pathlib import Path
 
 import torch
-from _report import write_report
+from _report import archive_path, write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded, LazyTensorStorage, RandomSampler, TensorDictReplayBuffer
 
 from s3rl_torchrl.data import SafeUnsafeSampler
-from s3rl_torchrl.modules import ContrastivePhase, build_s3rl_actor, get_policy_encoder
+from s3rl_torchrl.modules import build_s3rl_actor, get_policy_encoder
 from s3rl_torchrl.objectives import SafetyInfoNCELoss
+from s3rl_torchrl.trainer import ContrastivePhase
 
 OBS_DIM, ACT_DIM = 17, 6
 
@@ -115,11 +116,13 @@ def bench_size(size: int, args) -> dict:
     return result
 
 
-def bench_infonce(args) -> dict:
+def bench_infonce(args, buffer_size: int = 20_000, calls: int = 50, phase_steps: int = 50) -> dict:
+    """One InfoNCE step (``calls`` per round) and one contrastive phase of ``phase_steps``
+    steps, on a buffer of ``buffer_size`` transitions, per thread count of ``--infonce-threads``."""
     torch.manual_seed(0)
     spec = Bounded(-torch.ones(ACT_DIM), torch.ones(ACT_DIM), shape=(ACT_DIM,))
     actor = build_s3rl_actor(OBS_DIM, spec)
-    rb = filled_buffer(20_000, args.unsafe, SafeUnsafeSampler())
+    rb = filled_buffer(buffer_size, args.unsafe, SafeUnsafeSampler())
     view = SafeUnsafeSampler.contrastive_view(rb, args.triplets)
     loss = SafetyInfoNCELoss(get_policy_encoder(actor))
     optimizer = torch.optim.Adam(loss.encoder_parameters(), lr=5e-4)
@@ -131,13 +134,13 @@ def bench_infonce(args) -> dict:
         out["loss_infonce"].backward()
         optimizer.step()
 
-    phase = ContrastivePhase(loss, view, 5e-4, num_steps=50)
+    phase = ContrastivePhase(loss, view, 5e-4, num_steps=phase_steps)
     result = {"encoder_hidden": [128, 128], "rows_per_step": 3 * args.triplets}
     for threads in args.infonce_threads:
         torch.set_num_threads(threads)
         for _ in range(5):
             step()
-        step_ms = statistics.median(per_call_us(step, 50) for _ in range(args.rounds)) / 1e3
+        step_ms = statistics.median(per_call_us(step, calls) for _ in range(args.rounds)) / 1e3
         phase_ms = []
         for _ in range(3):
             start = time.perf_counter()
@@ -145,7 +148,7 @@ def bench_infonce(args) -> dict:
             phase_ms.append((time.perf_counter() - start) * 1e3)
         result[f"threads_{threads}"] = {
             "infonce_step_ms": step_ms,
-            "contrastive_phase_50_steps_ms": statistics.median(phase_ms),
+            f"contrastive_phase_{phase_steps}_steps_ms": statistics.median(phase_ms),
         }
     torch.set_num_threads(args.threads)
     return result
@@ -160,7 +163,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--threads", type=int, default=1, help="torch threads for the sampler")
     parser.add_argument("--infonce-threads", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/sampler.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("sampler"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 

@@ -1,7 +1,7 @@
 """Env steps per second of the whole S3RL recipe at the paper's settings, eager and compiled.
 
     python benchmarks/train_throughput.py [--frames 50000] [--task SafetyHalfCheetahVelocity-v1]
-        [--modes eager compiled] [--threads 1] [--out benchmarks/results/train_throughput.json]
+        [--modes eager compiled] [--threads 1] [--out benchmarks/results/archive/<date>/train_throughput.json]
 
 Paper settings (experiment=paper): 10 training envs, 0.2 gradient steps per frame, batch 256,
 128x128 networks, n-step 2, PID Lagrangian, the contrastive phase every 1000 gradient steps.
@@ -19,17 +19,19 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import recipe_config, write_report
+from _report import archive_path, recipe_config, write_report
 
 from s3rl_torchrl.trainer import Trainer
 
 
-def measure(task: str, frames: int, compiled: bool, threads: int) -> dict:
-    paper = recipe_config("experiment=paper", f"task={task}")
+def measure(task: str, frames: int, compiled: bool, threads: int,
+            experiment: str = "paper") -> dict:
+    """One run of the recipe at ``experiment`` (the harness's quick size: ``tiny``)."""
+    paper = recipe_config(f"experiment={experiment}", f"task={task}")
     epoch = paper.collector.frames_per_epoch  # the first epoch is the warm-up
     frames = -(-frames // epoch) * epoch
     cfg = recipe_config(
-        "experiment=paper",
+        f"experiment={experiment}",
         f"task={task}",
         f"collector.total_frames={epoch + frames}",
         f"compile={str(compiled).lower()}",
@@ -70,7 +72,7 @@ def main() -> None:
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument("--modes", nargs="*", default=["eager", "compiled"])
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/train_throughput.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("train_throughput"))
     args = parser.parse_args()
     rows = []
     for mode in args.modes:

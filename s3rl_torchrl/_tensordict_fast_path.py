@@ -5,7 +5,7 @@ Every ``TensorDictModule`` call writes each output through ``TensorDict.from_any
 through its type checks to ``importlib.util.find_spec("pandas")`` and returns the tensor
 unchanged; when pandas is not installed (it is not a dependency here) that lookup searches
 ``sys.path`` on every call: 33 us per module output here
-(benchmarks/results/from_any_fast_path.json; 0.7 us with the fast path). The collector's policy
+(benchmarks/results/archive/2026-11-24/from_any_fast_path.json; 0.7 us with the fast path). The collector's policy
 pays it 3 times per vector-env step, an eager SAC-Lag gradient step many times.
 
 The patch returns a plain tensor at once, which is what ``from_any`` returns for it: no branch

@@ -1,11 +1,22 @@
-"""``s3rl-report``: the paper's Table 1 and Figures 2-4 from a directory of runs."""
+"""``s3rl-report``: the paper's Table 1 and Figures 2-4 from a directory of runs, and two
+analyses of runs as subcommands:
+
+    s3rl-report RUNS [--out DIR] ...                  the report (report.md, figures)
+    s3rl-report lagrangian RUN_DIR... [--out ...]     the Lagrange multiplier's dynamics
+    s3rl-report compare-runs RUN_A RUN_B [--out ...]  do two runs give the same metrics?
+
+A first argument naming a subcommand selects it; anything else is the report's ``RUNS`` (a
+directory that happens to be called ``lagrangian`` is written ``./lagrangian``).
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from s3rl_torchrl.report.runs import ReportError, export_runs
 
@@ -39,6 +50,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             "them by task and algo, and write report.md with Table 1, the S3RL-vs-baseline "
             "tests, the paper's numbers, the aggregate over tasks (rliable) and Figures 2-4 "
             "(PNG and SVG)."
+        ),
+        epilog=(
+            "Subcommands (each with --help): 's3rl-report lagrangian RUN_DIR...' summarises "
+            "how the Lagrange multiplier and the cost behave over training; 's3rl-report "
+            "compare-runs RUN_A RUN_B' gives the largest relative difference of two runs' "
+            "metrics."
         ),
     )
     parser.add_argument("runs", help="a run, a Hydra multirun/sweep dir or an outputs dir")
@@ -85,11 +102,75 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def lagrangian_main(argv: Sequence[str]) -> int:
+    """``s3rl-report lagrangian``: :func:`s3rl_torchrl.report.lagrangian.summarise`."""
+    parser = argparse.ArgumentParser(
+        prog="s3rl-report lagrangian",
+        description=(
+            "How the Lagrange multiplier and the cost behave over training: per run, statistics "
+            "over the second half of training (cost over the limit, |delta lambda|, lambda, "
+            "reward and cost, the training cost's lag-1 autocorrelation, the final evaluation), "
+            "then their mean and std over seeds per task, algo and controller setting; printed "
+            "as a table."
+        ),
+    )
+    parser.add_argument("run_dirs", nargs="+", type=Path, metavar="RUN_DIR",
+                        help="s3rl-train run directories (those without metrics.csv are skipped)")
+    parser.add_argument("--out", type=Path, default=None, help="JSON summary")
+    parser.add_argument("--csv-dir", type=Path, default=None, help="copy metrics.csv files here")
+    parser.add_argument("--plot", type=Path, default=None, help="lambda and cost figure (PNG)")
+    parser.add_argument("--until", type=int, default=None, metavar="FRAMES",
+                        help="read the runs as if they had stopped at this many frames")
+    args = parser.parse_args(argv)
+    from s3rl_torchrl.report.lagrangian import summarise
+
+    summarise(args.run_dirs, args.out, args.csv_dir, args.plot, args.until,
+              command=shlex.join(["s3rl-report", "lagrangian", *argv]))
+    return 0
+
+
+def compare_runs_main(argv: Sequence[str]) -> int:
+    """``s3rl-report compare-runs``: :func:`s3rl_torchrl.report.compare_runs.compare_runs`."""
+    parser = argparse.ArgumentParser(
+        prog="s3rl-report compare-runs",
+        description=(
+            "Do two runs give the same metrics? The largest relative difference per metrics.csv "
+            "column (timings left out) and of the final evaluation, e.g. of a seeded run before "
+            "and after a speed-up."
+        ),
+    )
+    parser.add_argument("a", type=Path, metavar="RUN_A")
+    parser.add_argument("b", type=Path, metavar="RUN_B")
+    parser.add_argument("--out", type=Path, default=None, help="JSON summary")
+    args = parser.parse_args(argv)
+    from s3rl_torchrl.report.compare_runs import compare_runs
+    from s3rl_torchrl.report.records import write_json
+
+    try:
+        summary = compare_runs(args.a, args.b)
+    except (ReportError, OSError) as err:
+        print(f"s3rl-report compare-runs: error: {err}", file=sys.stderr)
+        return 2
+    print(json.dumps({k: v for k, v in summary.items()
+                      if k != "max_relative_difference_by_column"}))
+    if args.out is not None:
+        write_json(args.out, summary, shlex.join(["s3rl-report", "compare-runs", *argv]))
+    return 0
+
+
+SUBCOMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
+    "lagrangian": lagrangian_main,
+    "compare-runs": compare_runs_main,
+}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] in SUBCOMMANDS:
+        return SUBCOMMANDS[argv[0]](argv[1:])
     args = parse_args(argv)
     from s3rl_torchrl.report.build import build_report, export_embedding_panels
 
-    argv = sys.argv[1:] if argv is None else list(argv)
     if args.export_runs is not None:
         try:
             export = export_runs(args.runs, args.export_runs)

@@ -153,7 +153,7 @@ def compile_loss(fn: Callable) -> Callable:
     eager) and are checked one after the other on each call.
 
     No guards on the modules' Python attributes (``skip_guard_on_all_nn_modules_unsafe``):
-    checking them took 0.5 ms of a 4.7 ms gradient step (benchmarks/results/guard_filter.json).
+    checking them took 0.5 ms of a 4.7 ms gradient step (benchmarks/results/archive/2026-11-24/guard_filter.json).
     What changes during training reaches the compiled code anyway: parameters, buffers, lambda
     and log alpha are tensors read at each call (tensor and global guards, grad mode included,
     stay). What it no longer sees is a Python attribute of a loss or network reassigned after

@@ -1,9 +1,10 @@
-"""benchmarks/lagrangian_dynamics.py: second-half statistics against a hand-made run, and a
-launch of two tiny runs end to end."""
+"""benchmarks/studies/lagrangian_dynamics.py: a launch of tiny runs end to end (alone and as a
+group of seeds in one process), the controllers on the synthetic plant, and every setting
+composing to the controller it names. Its statistics are s3rl-report lagrangian's
+(tests/report/test_lagrangian_summary.py)."""
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import sys
@@ -11,131 +12,11 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks" / "studies"))
 import lagrangian_dynamics as ld  # noqa: E402
 
-COLUMNS = ["frames", "epoch", "train/reward", "train/cost", "lagrangian"]
-COLUMNS += ["eval/reward", "eval/cost"]
 
-
-def fake_run(root: Path, seed: int, rows: list[list[float]], updates, final=None) -> Path:
-    run = root / f"seed{seed}"
-    (run / "logs" / "exp" / "scalars" / "lagrangian").mkdir(parents=True)
-    config = {
-        "task": {"name": "SafetyHalfCheetahVelocity-v1", "cost_limit": 10.0},
-        "algo": {
-            "name": "sac_lag",
-            "lagrangian": "pid",
-            "lagrangian_lr": 0.005,
-            "pid": {
-                "kp": 0.05,
-                "ki": 0.0005,
-                "kd": 0.1,
-                "ema_alpha": 0.0,
-                "derivative_delay": 1,
-                "penalty_max": None,
-            },
-        },
-        "collector": {"frames_per_batch": 20000},
-        "seed": seed,
-    }
-    (run / "config.json").write_text(json.dumps(config))
-    with (run / "metrics.csv").open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(COLUMNS)
-        writer.writerows(rows)
-    with (run / "logs" / "exp" / "scalars" / "lagrangian" / "value.csv").open("w") as f:
-        f.writelines(f"{frames},{lam}\n" for frames, lam in updates)
-    if final is not None:
-        (run / "final_eval.json").write_text(
-            json.dumps({"reward_mean": final[0], "cost_mean": final[1]})
-        )
-    return run
-
-
-def test_second_half_statistics_by_hand(tmp_path):
-    nan = float("nan")
-    # frames, epoch, train reward, train cost, lambda, eval reward, eval cost
-    rows = [
-        [20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0],
-        [40000, 2, 0.0, 650.0, 90.0, 100.0, 0.0],
-        [60000, 3, 0.0, nan, 1.0, 100.0, 800.0],
-        [80000, 4, 2000.0, 20.0, 100.0, 3000.0, 900.0],  # second half: frames > 60000
-        [100000, 5, 500.0, 15.0, 0.5, -100.0, 0.0],
-        [120000, 6, 800.0, 0.0, 2.0, 1000.0, 5.0],
-    ]
-    updates = [(20000, 0), (40000, 90), (60000, 1), (80000, 100), (90000, 50), (100000, 0.5)]
-    updates.append((120000, 2))
-    a = fake_run(tmp_path, 10, rows, updates, final=(2500.0, 3.0))
-    s = ld.summarise_run(a)
-    assert s["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) batch=20000"
-    assert (s["frames"], s["epochs_second_half"], s["seed"]) == (120000, 3, 10)
-    assert s["eval_cost_over_limit"] == pytest.approx(1 / 3)  # 900 | 0, 5
-    assert s["train_cost_over_limit"] == pytest.approx(2 / 3)  # 20, 15 | 0
-    assert s["mean_abs_dlambda_epoch"] == pytest.approx((99.5 + 1.5) / 2)
-    assert s["mean_abs_dlambda_update"] == pytest.approx((50 + 49.5 + 1.5) / 3)
-    assert s["lambda_mean"] == pytest.approx(102.5 / 3)
-    assert s["eval_reward"] == pytest.approx(1300.0)
-    assert s["eval_cost"] == pytest.approx(905 / 3)
-    assert s["train_cost"] == pytest.approx(35 / 3)
-    # Deviations from the mean 35/3: 25/3, 10/3, -35/3; pairs (25/3)(10/3) + (10/3)(-35/3).
-    assert s["train_cost_autocorr"] == pytest.approx((250 - 350) / (625 + 100 + 1225))
-    assert (s["final_reward"], s["final_cost"]) == (2500.0, 3.0)
-    # The last 20% of 6 epochs: round(1.2) = 1 epoch, the last.
-    assert (s["eval_reward_last20"], s["eval_cost_last20"]) == (1000.0, 5.0)
-
-    # A second seed of the same setting: every late eval cost over the limit, no final eval.
-    rows_b = [[r[0], r[1], r[2], r[3], r[4] * 2, r[5], 50.0] for r in rows]
-    b = fake_run(tmp_path, 20, rows_b, updates)
-    report = ld.summarise([a, b, tmp_path / "not_a_run"], tmp_path / "s.json", None, None)
-    (row,) = report["settings"]
-    assert row["seeds"] == [10, 20]
-    assert row["eval_cost_over_limit"] == pytest.approx((1 / 3 + 1) / 2)
-    assert row["eval_cost_over_limit_std"] == pytest.approx(math.sqrt(2 * (1 / 3) ** 2))
-    assert row["mean_abs_dlambda_epoch"] == pytest.approx((50.5 + 101) / 2)
-    assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
-    assert row["eval_cost_last20"] == pytest.approx((5.0 + 50.0) / 2)
-    line = ld.markdown(report["settings"]).splitlines()[-1]
-    assert line.endswith("| 1000 | 27.5 | 2500 | 3.0 |")  # one final evaluation: no std
-    saved = json.loads((tmp_path / "s.json").read_text())
-    assert saved["settings"][0]["seeds"] == [10, 20] and len(saved["runs"]) == 2
-
-
-def test_lag1_autocorrelation_by_hand():
-    nan = float("nan")
-    # A period-2 cycle: deviations -50, 50, -50, 50, three pairs of -2500 over 4 x 2500.
-    assert ld.lag1_autocorrelation([0.0, 100.0, 0.0, 100.0]) == pytest.approx(-0.75)
-    # A ramp: mean 2, deviations -2..2: pairs 2 + 0 + 0 + 2 = 4 over 10.
-    assert ld.lag1_autocorrelation([0.0, 1.0, 2.0, 3.0, 4.0]) == pytest.approx(0.4)
-    # Epochs without a training episode (NaN) break their pairs, not the series' mean.
-    assert ld.lag1_autocorrelation([0.0, 100.0, nan, 0.0, 100.0]) == pytest.approx(-0.5)
-    assert math.isnan(ld.lag1_autocorrelation([5.0, 5.0, 5.0]))  # no variance
-    assert math.isnan(ld.lag1_autocorrelation([1.0, nan, 2.0]))  # too short
-
-
-def test_until_reads_a_run_as_if_it_had_stopped_there(tmp_path):
-    nan = float("nan")
-    rows = [
-        [20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0],
-        [40000, 2, 0.0, 650.0, 90.0, 100.0, 0.0],
-        [60000, 3, 0.0, nan, 1.0, 100.0, 800.0],  # second half of 100000: frames > 50000
-        [80000, 4, 2000.0, 20.0, 100.0, 3000.0, 900.0],
-        [100000, 5, 500.0, 15.0, 0.5, -100.0, 0.0],
-        [120000, 6, 800.0, 0.0, 2.0, 1000.0, 5.0],  # after the cut
-    ]
-    updates = [(20000, 0), (40000, 90), (60000, 1), (80000, 100), (90000, 50), (100000, 0.5)]
-    updates.append((120000, 2))
-    run = fake_run(tmp_path, 10, rows, updates, final=(2500.0, 3.0))
-    s = ld.summarise_run(run, until=100000)
-    assert (s["frames"], s["epochs_second_half"]) == (100000, 3)
-    assert s["eval_cost_over_limit"] == pytest.approx(2 / 3)  # 800, 900 | 0
-    assert s["train_cost_over_limit"] == 1.0  # 20, 15 (the NaN epoch has no episode)
-    assert s["mean_abs_dlambda_epoch"] == pytest.approx((99 + 99.5) / 2)
-    assert s["mean_abs_dlambda_update"] == pytest.approx((99 + 50 + 49.5) / 3)
-    # The final evaluation belongs to the whole run, not to its first 100000 frames.
-    assert math.isnan(s["final_reward"]) and math.isnan(s["final_cost"])
-
-
+@pytest.mark.slow
 def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
     args = ["launch", "--experiment", "tiny", "--settings", "pid_ema", "--seeds", "1", "2"]
     args += ["--frames", "400", "--group", "--no-compile", "--runs-dir", str(tmp_path / "runs")]
@@ -158,6 +39,7 @@ def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
     assert "launch:" not in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_launch_two_settings_of_tiny_runs_then_skip_them(tmp_path, capsys):
     args = ["launch", "--experiment", "tiny", "--settings", "fsrl", "pid_ema", "--seeds", "1"]
     args += ["--frames", "400", "--no-compile", "--jobs", "2", "--runs-dir", str(tmp_path / "runs")]
@@ -191,48 +73,6 @@ def test_plant_mode_builds_the_configured_controllers(tmp_path):
     assert rows["learned_lr0.05"]["first_lambdas_seed0"][0] == pytest.approx(0.05, abs=1e-6)
     # Second half (updates 3, 4): J = 900 then 0 for FSRL, over the limit once in two.
     assert rows["fsrl"]["cost_over_limit"] == 0.5
-
-
-def test_algos_with_the_same_controller_are_summarised_apart(tmp_path):
-    rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
-    sac_lag = fake_run(tmp_path / "sac_lag", 10, rows, [(20000, 0.0), (40000, 9.0)])
-    s3rl = fake_run(tmp_path / "s3rl", 10, rows, [(20000, 0.0), (40000, 9.0)])
-    config = json.loads((s3rl / "config.json").read_text())
-    config["algo"]["name"] = "s3rl"
-    (s3rl / "config.json").write_text(json.dumps(config))
-    report = ld.summarise([sac_lag, s3rl], None, tmp_path / "csv", None)
-    assert [(r["algo"], r["seeds"]) for r in report["settings"]] == [
-        ("s3rl", [10]),
-        ("sac_lag", [10]),
-    ]
-    task_dir = tmp_path / "csv" / "SafetyHalfCheetahVelocity-v1"
-    copies = sorted(p.relative_to(task_dir).as_posix() for p in task_dir.rglob("*.csv"))
-    assert copies == [
-        "pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
-        "s3rl/pid_kp_0.05_ki_0.0005_kd_0.1_batch_20000/seed10.csv",
-    ]
-
-
-def test_plot_has_a_pair_of_rows_per_setting_and_a_column_per_seed(tmp_path):
-    rows = [[20000, 1, 0.0, 0.0, 0.0, 100.0, 700.0], [40000, 2, 0.0, 50.0, 9.0, 100.0, 0.0]]
-    updates = [(20000, 0.0), (40000, 9.0)]
-    runs = [fake_run(tmp_path / "sac_lag", seed, rows, updates) for seed in (20, 10)]
-    s3rl = fake_run(tmp_path / "s3rl", 10, rows, updates)
-    config = json.loads((s3rl / "config.json").read_text())
-    config["algo"]["name"] = "s3rl"
-    (s3rl / "config.json").write_text(json.dumps(config))
-    summaries = [ld.summarise_run(r) for r in [*runs, s3rl]]
-    fig = ld.plot(summaries, tmp_path / "dynamics.png")
-    assert (tmp_path / "dynamics.png").stat().st_size > 0
-    grid = fig.axes[0].get_subplotspec().get_gridspec()
-    assert (grid.nrows, grid.ncols) == (4, 2)  # (lambda, cost) x 2 settings, 2 seeds at most
-    visible = [ax for ax in fig.axes if ax.get_visible()]
-    assert len(visible) == 6  # s3rl has one seed: its second column stays empty
-    assert [ax.get_title().split("\n")[0] for ax in visible if ax.get_title()] == [
-        "HalfCheetahVelocity-v1 sac_lag seed 10",
-        "HalfCheetahVelocity-v1 sac_lag seed 20",
-        "HalfCheetahVelocity-v1 s3rl seed 10",
-    ]
 
 
 @pytest.mark.parametrize("experiment", ["paper", "safe"])

@@ -1,8 +1,8 @@
 """What a gradient step's batch costs to draw: torchrl's ``replay_buffer.sample()`` against a
 hand-written gather into a preallocated batch (the alternative issue 28 names).
 
-    python benchmarks/sample_gather.py [--threads 1] [--calls 200] [--rounds 9] \
-        [--out benchmarks/results/sample_gather.json]
+    python benchmarks/studies/sample_gather.py [--threads 1] [--calls 200] [--rounds 9] \
+        [--out benchmarks/results/archive/<date>/sample_gather.json]
 
 The buffer is the recipe's (``build_replay_buffer`` at ``experiment=paper`` settings: 100 000
 slots, ``SafeUnsafeSampler``, batch 256) filled with 100 000 transitions of the keys the
@@ -25,8 +25,9 @@ import argparse
 import statistics
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, recipe_config, write_report
+from _report import archive_path, interleaved_rounds, recipe_config, write_report
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
@@ -66,7 +67,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=9)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/sample_gather.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("sample_gather"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     cfg = recipe_config("experiment=paper", "algo=s3rl")

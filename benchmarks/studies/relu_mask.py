@@ -1,7 +1,7 @@
 """Why the package has its own ReLU: compiled ``torch.relu`` against ``s3rl_torchrl.modules.relu``.
 
-    python benchmarks/relu_mask.py [--calls 200] [--rounds 5] [--seeds 2] \
-        [--out benchmarks/results/relu_mask.json]
+    python benchmarks/studies/relu_mask.py [--calls 200] [--rounds 5] [--seeds 2] \
+        [--out benchmarks/results/archive/<date>/relu_mask.json]
 
 Two measurements, one thread, microseconds per call, median over interleaved rounds:
 
@@ -23,8 +23,9 @@ import argparse
 import statistics
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 
 from s3rl_torchrl.modules import relu
 
@@ -62,7 +63,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=2, help="agents in the vmap case")
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/relu_mask.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("relu_mask"))
     args = parser.parse_args()
     torch.set_num_threads(1)
 

@@ -2,8 +2,8 @@
 three fused Adam steps and the target update) against the whole step in one ``torch.compile``
 region with compiled autograd (issue 28's "the whole update as one compiled region").
 
-    python benchmarks/whole_step_compile.py [--calls 100] [--rounds 9] \
-        [--out benchmarks/results/whole_step_compile.json]
+    python benchmarks/studies/whole_step_compile.py [--calls 100] [--rounds 9] \
+        [--out benchmarks/results/archive/<date>/whole_step_compile.json]
 
 ``experiment=paper``, SAC-Lag, SafetyHalfCheetahVelocity-v1, one thread, a batch of 256
 transitions of a short rollout. The whole-step case needs Adam with ``foreach`` (the recipe's
@@ -20,8 +20,9 @@ import statistics
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 
 from s3rl_torchrl.trainer import compile_loss
@@ -45,7 +46,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=100)
     parser.add_argument("--rounds", type=int, default=9)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/whole_step_compile.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("whole_step_compile"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     cfg = paper_config("SafetyHalfCheetahVelocity-v1", 2000, True, 1, None, 2000)

@@ -1,8 +1,8 @@
 """The floor under the SAC-Lag gradient step on this machine: matmul throughput and a
 plain-PyTorch copy of the step (no torchrl, no tensordict).
 
-    python benchmarks/plain_step.py [--threads 1 2] [--steps 200] [--rounds 5] \
-        [--out benchmarks/results/plain_step.json]
+    python benchmarks/studies/plain_step.py [--threads 1 2] [--steps 200] [--rounds 5] \
+        [--out benchmarks/results/archive/<date>/plain_step.json]
 
 The plain step has the recipe's shapes and order (HalfCheetah: obs 17, act 6; batch 256;
 128x128 ReLU networks; four Q-nets = double reward + double cost critic as one batched ensemble,
@@ -22,9 +22,10 @@ import statistics
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
 import torch.nn.functional as F
-from _report import write_report
+from _report import archive_path, write_report
 
 OBS, ACT, HIDDEN, BATCH, NETS = 17, 6, 128, 256, 4
 
@@ -139,7 +140,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, nargs="*", default=[1, 2])
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/plain_step.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("plain_step"))
     args = parser.parse_args()
     rows = []
     ctx = mp.get_context("spawn")

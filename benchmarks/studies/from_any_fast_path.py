@@ -1,8 +1,8 @@
 """What tensordict's ``from_any`` costs per TensorDictModule output, with and without the
 package's fast path for plain tensors (s3rl_torchrl/_tensordict_fast_path.py).
 
-    python benchmarks/from_any_fast_path.py [--threads 2] [--rounds 7] \
-        [--out benchmarks/results/from_any_fast_path.json]
+    python benchmarks/studies/from_any_fast_path.py [--threads 2] [--rounds 7] \
+        [--out benchmarks/results/archive/<date>/from_any_fast_path.json]
 
 Three cases, each timed with tensordict's own ``from_any`` and with the fast path, in
 interleaved rounds in one process (the patch is swapped in and out between cases):
@@ -20,8 +20,9 @@ import statistics
 import tempfile
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 from tensordict import TensorDict, TensorDictBase
 
@@ -48,7 +49,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument("--out", type=Path,
-                        default=Path("benchmarks/results/from_any_fast_path.json"))
+                        default=archive_path("from_any_fast_path"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     rows = []

@@ -1,7 +1,7 @@
 """What dynamo's guards cost a compiled gradient step, and what the recipe's guard filter saves.
 
-    python benchmarks/compile_guards.py [--threads 2] [--calls 100] [--rounds 7] \
-        [--out benchmarks/results/guard_filter.json]
+    python benchmarks/studies/compile_guards.py [--threads 2] [--calls 100] [--rounds 7] \
+        [--out benchmarks/results/archive/<date>/guard_filter.json]
 
 Before every call of a compiled function, dynamo checks its guards: that the tensors, the
 global state and every Python attribute the trace read (of the loss, its networks and their
@@ -20,8 +20,9 @@ import argparse
 import statistics
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 
 FILTERS = {
@@ -37,7 +38,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=100)
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/guard_filter.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("guard_filter"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     cfg = paper_config(args.task, 0, True, args.threads, None, 10_000)

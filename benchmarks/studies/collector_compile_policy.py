@@ -3,8 +3,8 @@ policy, ``experiment=paper``, SafetyHalfCheetahVelocity-v1, 10 env copies) with 
 eager, as the recipe runs it, and with ``Collector(..., compile_policy=...)`` (issue 28's
 "batch the policy call").
 
-    python benchmarks/collector_compile_policy.py [--frames 2000] [--rounds 7] \
-        [--out benchmarks/results/collector_compile_policy.json]
+    python benchmarks/studies/collector_compile_policy.py [--frames 2000] [--rounds 7] \
+        [--out benchmarks/results/archive/<date>/collector_compile_policy.json]
 
 Each case is one collector over the same env (built as the trainer builds it), timed in
 interleaved rounds in one process, one collect of ``--frames`` frames per round, with this
@@ -20,8 +20,9 @@ import statistics
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import paper_agents, paper_config
 from torchrl.collectors import Collector
 
@@ -33,7 +34,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument(
-        "--out", type=Path, default=Path("benchmarks/results/collector_compile_policy.json")
+        "--out", type=Path, default=archive_path("collector_compile_policy")
     )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)

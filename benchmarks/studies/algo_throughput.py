@@ -1,7 +1,7 @@
 """Env steps per second of every algorithm of the registry at its default settings, one run.
 
-    python benchmarks/algo_throughput.py [--frames 4000] [--task SafetyHalfCheetahVelocity-v1]
-        [--algos s3rl sac_lag ...] [--out benchmarks/results/algo_throughput.json]
+    python benchmarks/studies/algo_throughput.py [--frames 4000] [--task SafetyHalfCheetahVelocity-v1]
+        [--algos s3rl sac_lag ...] [--out benchmarks/results/archive/<date>/algo_throughput.json]
 
 Default settings: ``s3rl-train algo=<name>`` as composed (experiment=quick: 4 training envs,
 1000-frame collects, batch 256; off-policy 0.5 gradient steps per frame after a 5000-frame
@@ -22,7 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import recipe_config, write_report
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
+from _report import archive_path, recipe_config, write_report
 
 from s3rl_torchrl.trainer import Trainer
 from s3rl_torchrl.trainer.config import ALGO_FAMILIES, ALGO_NAMES
@@ -100,7 +101,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=4000)
     parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
     parser.add_argument("--algos", nargs="*", default=list(ALGO_NAMES))
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/algo_throughput.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("algo_throughput"))
     args = parser.parse_args()
     uptime_before = Path("/proc/loadavg").read_text().split()[:3]
     rows = []

@@ -1,6 +1,6 @@
 """Two ways to run K seeds faster than ``MultiSeedTrainer`` does, measured before building them.
 
-    python benchmarks/multiseed_alternatives.py [--seeds 5] [--out benchmarks/results/multiseed_alternatives.json]
+    python benchmarks/studies/multiseed_alternatives.py [--seeds 5] [--out benchmarks/results/archive/<date>/multiseed_alternatives.json]
 
 * **Step in two threads**: the K seeds' gradient step as two ``StackedSACLag`` groups (the first
   half of the seeds and the rest), run at once in two Python threads with one torch thread
@@ -24,8 +24,9 @@ import statistics
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 from tensordict import TensorDict
 
@@ -113,7 +114,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--out", type=Path,
-                        default=Path("benchmarks/results/multiseed_alternatives.json"))
+                        default=archive_path("multiseed_alternatives"))
     args = parser.parse_args()
     torch.set_num_threads(2)
     cfg = paper_config(TASK, 0, True, 2, None, 10_000)

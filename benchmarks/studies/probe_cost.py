@@ -1,7 +1,7 @@
 """What the training-time linear probe costs per epoch (``probe/accuracy``, ``probe/auc``).
 
-    python benchmarks/probe_cost.py [--calls 3] [--rounds 5] \
-        [--out benchmarks/results/probe_cost.json]
+    python benchmarks/studies/probe_cost.py [--calls 3] [--rounds 5] \
+        [--out benchmarks/results/archive/<date>/probe_cost.json]
 
 One thread, milliseconds per call of ``replay_probe`` (median over interleaved rounds): draw
 1000 safe + 1000 unsafe transitions from a filled replay buffer (HalfCheetah-sized observations,
@@ -17,8 +17,9 @@ import argparse
 import statistics
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer
 
@@ -42,7 +43,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=3)
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/probe_cost.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("probe_cost"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(0)

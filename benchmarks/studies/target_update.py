@@ -1,7 +1,7 @@
 """Microseconds per target update: torchrl's ``SoftUpdate`` against ``ForeachSoftUpdate``.
 
-    python benchmarks/target_update.py [--calls 1000] [--rounds 7] \
-        [--out benchmarks/results/target_update.json]
+    python benchmarks/studies/target_update.py [--calls 1000] [--rounds 7] \
+        [--out benchmarks/results/archive/<date>/target_update.json]
 
 The loss of ``benchmarks/loss_step.py`` (``SACLagLoss``, HalfCheetah sizes, 128x128, one cost:
 four critics with targets), one thread, both updaters on the same loss, timed in interleaved
@@ -14,8 +14,9 @@ import argparse
 import statistics
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
-from _report import interleaved_rounds, write_report
+from _report import archive_path, interleaved_rounds, write_report
 from loss_step import ENVS, make_loss
 from torchrl.objectives import SoftUpdate
 
@@ -26,7 +27,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=1000)
     parser.add_argument("--rounds", type=int, default=7)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/target_update.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("target_update"))
     args = parser.parse_args()
     torch.set_num_threads(1)
     loss = make_loss("sac_lag", *ENVS["halfcheetah"])

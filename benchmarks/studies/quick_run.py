@@ -2,8 +2,8 @@
 whatever the seed and the floating-point rounding? Each seed and compile mode in a fresh process,
 as a user runs it; the last policy's final evaluation and the wall time of each run.
 
-    python benchmarks/quick_run.py [--seeds 1 2 3 4 5] [--compile true false]
-        [--out benchmarks/results/quick_run.json] [-- extra s3rl-train overrides]
+    python benchmarks/studies/quick_run.py [--seeds 1 2 3 4 5] [--compile true false]
+        [--out benchmarks/results/archive/<date>/quick_run.json] [-- extra s3rl-train overrides]
 
 Extra overrides after ``--`` go to every run (to try a setting before it becomes the default).
 The JSON has one record per run: seed, compile, the final evaluation (reward, cost and their
@@ -22,7 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from _report import write_report
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
+from _report import archive_path, write_report
 
 TRAIN = str(Path(sys.executable).with_name("s3rl-train"))
 
@@ -69,7 +70,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     parser.add_argument("--compile", nargs="+", default=["true", "false"])
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results/quick_run.json"))
+    parser.add_argument("--out", type=Path, default=archive_path("quick_run"))
     args = parser.parse_args(argv)
     records = []
     for compiled in (c == "true" for c in args.compile):

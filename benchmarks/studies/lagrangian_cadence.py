@@ -1,7 +1,7 @@
 """What the per-step Lagrangian costs: gradient steps per second with and without it.
 
-    python benchmarks/lagrangian_cadence.py [--task SafetyHalfCheetahVelocity-v1] [--threads 1]
-        [--steps 200] [--rounds 15] [--no-compile] [--out benchmarks/results/lagrangian_cadence.json]
+    python benchmarks/studies/lagrangian_cadence.py [--task SafetyHalfCheetahVelocity-v1] [--threads 1]
+        [--steps 200] [--rounds 15] [--no-compile] [--out benchmarks/results/archive/<date>/lagrangian_cadence.json]
 
 One SAC-Lag agent at the paper's settings (experiment=paper: 128x128 networks, batch 256), built as the
 trainer builds it (compiled unless ``--no-compile``). Cases, timed in interleaved rounds (each round times every
@@ -25,6 +25,7 @@ import statistics
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
 from _report import interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
