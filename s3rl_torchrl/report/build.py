@@ -363,7 +363,8 @@ def _critic_table(groups: Sequence[RunGroup]) -> list[str]:
         negative, bias, alpha, share = [], [], [], []
         for run in group.runs:
             rows = run.metrics
-            cost_q = [r.get("critic/cost_q", math.nan) for r in rows]
+            column = "critic/cost_q" if rows and "critic/cost_q" in rows[0] else "train/cost_q"
+            cost_q = [r.get(column, math.nan) for r in rows]
             known = [v for v in cost_q if not math.isnan(v)]
             negative.append(sum(v < 0 for v in known) / len(known) if known else math.nan)
             bias += tail([r.get("critic/cost_error", math.nan) for r in rows])
@@ -516,7 +517,8 @@ def build_report(
         "![Figure 2](figure2_learning_curves.png)",
         "",
     ]
-    diagnosed = [g for g in groups if any("critic/cost_q" in r.metrics[0] for r in g.runs
+    # Runs of every version log train/cost_q; runs since the critic diagnostics also critic/*.
+    diagnosed = [g for g in groups if any("train/cost_q" in r.metrics[0] for r in g.runs
                                           if r.metrics)]
     if diagnosed:
         diagnosed_by_task = {
@@ -531,7 +533,10 @@ def build_report(
             "Per epoch (`critic/*`, `grad/*` and `train/alpha` of `metrics.csv`): the cost and "
             "reward critics at the steps of the last 10 finished training episodes against the "
             "discounted returns that followed them, alpha, and the share of the actor's gradient "
-            "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\").",
+            "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\"). "
+            "Runs written before those columns existed count their negative cost critics on "
+            "`train/cost_q` (the last gradient step's batch mean at `a ~ pi`) and show `-` for "
+            "the rest.",
             "",
             *_critic_table(diagnosed),
             "",
