@@ -28,9 +28,11 @@ from _report import archive_path, write_report
 TRAIN = str(Path(sys.executable).with_name("s3rl-train"))
 
 
-def run(seed: int, compiled: bool, extra: list[str]) -> dict:
+def run(seed: int, compiled: bool, extra: list[str], keep: Path | None = None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp) / "run"
+        if keep is not None:
+            run_dir = keep / f"seed{seed}_compile{str(compiled).lower()}"
         command = [
             TRAIN,
             f"seed={seed}",
@@ -70,12 +72,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     parser.add_argument("--compile", nargs="+", default=["true", "false"])
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep each run's directory under this one (default: discard them)")
     parser.add_argument("--out", type=Path, default=archive_path("quick_run"))
     args = parser.parse_args(argv)
     records = []
     for compiled in (c == "true" for c in args.compile):
         for seed in args.seeds:
-            record = run(seed, compiled, extra)
+            record = run(seed, compiled, extra, args.keep)
             records.append(record)
             print(
                 f"seed {seed} compile={compiled}: reward {record['reward']:.1f}, cost "
