@@ -126,12 +126,17 @@ def discounted_returns(signal: Tensor, gamma: float, terminated: bool) -> Tensor
 
 @torch.no_grad()
 def critic_calibration(
-    loss, episodes: list[TensorDictBase], gamma: float, max_rows: int = 2000
+    loss,
+    episodes: list[TensorDictBase],
+    gamma: float,
+    max_rows: int = 2000,
+    cost_gamma: float | None = None,
 ) -> dict[str, float]:
     """The critics at the steps of ``episodes`` against the steps' discounted returns.
 
     ``loss`` is a :class:`~s3rl_torchrl.objectives.SACLagLoss` (its current critics: the reward
-    pair through its min, the cost pair as the actor loss reads it). Rows are every
+    pair through its min, the cost pair as the actor loss reads it); the costs are discounted
+    with ``cost_gamma`` when the cost critics have their own (``None``: ``gamma``). Rows are every
     ``ceil(rows / max_rows)``-th step. Returns, for ``reward`` and ``cost`` (summed over costs):
     ``critic/<signal>_q`` (mean prediction), ``critic/<signal>_return`` (mean return),
     ``critic/<signal>_error`` (mean prediction minus return) and ``critic/<signal>_rmse``; NaN
@@ -147,7 +152,8 @@ def critic_calibration(
         terminated = bool(episode.get(("next", "terminated"))[-1].any())
         reward_returns.append(discounted_returns(episode.get(("next", "reward")), gamma, terminated))
         cost = episode.get(("next", "cost")).sum(-1)
-        cost_returns.append(discounted_returns(cost, gamma, terminated))
+        cost_discount = gamma if cost_gamma is None else cost_gamma
+        cost_returns.append(discounted_returns(cost, cost_discount, terminated))
         rows.append(episode.select("observation", "action"))
     data = torch.cat(rows, 0)
     targets = {"reward": torch.cat(reward_returns), "cost": torch.cat(cost_returns)}

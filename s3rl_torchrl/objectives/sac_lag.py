@@ -22,6 +22,9 @@ large multiplier (docs/objectives.md, "Sound critics"); each replaces one piece:
   confidence bound of its cost ensemble) or ``"mean"``;
 - ``cost_nonnegative``: the cost critic's bootstrap value and its read in ``L_pi`` are clamped at
   0 (every cost is >= 0, so is every cost value);
+- ``cost_gamma``: the cost critics' own discount (``gamma`` by default): a shorter horizon ranks
+  the actions by the costs they bring soon, where a cost that lasts for most of an episode
+  flattens ``Q_c`` across actions;
 - ``entropy_rescaling=False``: only the reward and cost terms are divided by ``1 + sum lambda``,
   ``L_pi = mean(alpha log pi) + mean(sum_i lambda_i Q_i - Q_0) / (1 + sum_i lambda_i)``, so that
   automatic alpha does not have to grow with lambda to hold its target entropy.
@@ -119,6 +122,8 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             cost targets and in the actor loss (module docstring).
         cost_nonnegative: clamp the cost critics' bootstrap value and their read in the actor
             loss at 0 (FSRL: ``False``).
+        cost_gamma: the cost critics' discount; ``None`` (FSRL): the value estimator's gamma.
+            n-step cost sums must use it too (``make_nstep_transform(cost_gamma=...)``).
         lagrangian_init: initial ``lagrangian`` (float or ``m`` values, >= 0).
         critic_eval: how the critics are evaluated (same numbers up to float rounding, speed
             differs, see ``docs/objectives.md``): ``"batched_mlp"`` runs every reward and cost
@@ -188,6 +193,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         entropy_rescaling: bool = True,
         cost_critic_read: Literal["min", "max", "mean"] = "min",
         cost_nonnegative: bool = False,
+        cost_gamma: float | None = None,
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
         critic_eval: Literal["auto", "batched_mlp", "fused_vmap", "vmap"] = "auto",
         separate_losses: bool = False,
@@ -223,6 +229,8 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
                 f"Unknown cost_critic_read {cost_critic_read!r}; valid choices are "
                 f"{', '.join(map(repr, COST_CRITIC_READS))}."
             )
+        if cost_gamma is not None and not 0.0 <= cost_gamma <= 1.0:
+            raise ValueError(f"cost_gamma must be in [0, 1] or None, got {cost_gamma!r}.")
         if critic_eval not in _CRITIC_EVAL_CHOICES:
             raise ValueError(
                 f"Unknown critic_eval {critic_eval!r}; valid choices are "
@@ -273,6 +281,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         self.entropy_rescaling = bool(entropy_rescaling)
         self.cost_critic_read = cost_critic_read
         self.cost_nonnegative = bool(cost_nonnegative)
+        self.cost_gamma = None if cost_gamma is None else float(cost_gamma)
         self._init_lagrangian(lagrangian_init, device=self.log_alpha.device)
 
         if num_costs > 0:
@@ -512,10 +521,29 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
                 next_cost_value = self.read_cost(q_cost).movedim(0, -1)
                 if self.cost_nonnegative:
                     next_cost_value = next_cost_value.clamp_min(0.0)
+                if self.cost_gamma is not None:
+                    target = self._td0(tensordict, rewards, next_value)
+                    cost_target = self._cost_td0(tensordict, cost.to(rewards.dtype), next_cost_value)
+                    return target[..., 0], cost_target
                 next_value = torch.cat([next_value, next_cost_value], -1)
                 rewards = torch.cat([rewards, cost.to(rewards.dtype)], -1)
             target = self._td0(tensordict, rewards, next_value)
         return target[..., 0], target[..., 1:]
+
+    def _cost_td0(self, tensordict: TensorDictBase, cost: Tensor, next_value: Tensor) -> Tensor:
+        """``y_i = C_i + cost_gamma ** k (1 - terminated) V'_i`` (``[*B, m]``), k the steps to
+        the bootstrap observation, as torchrl's TD(0) does with its own gamma."""
+        keys = self.tensor_keys
+        terminated = tensordict.get(_next(keys.terminated), None)
+        if terminated is None:
+            terminated = tensordict.get(_next(keys.done))
+        alive = (~terminated.reshape(*tensordict.batch_size, 1)).to(cost.dtype)
+        steps = tensordict.get(keys.steps_to_next_obs, None)
+        if steps is None:
+            discount = self.cost_gamma
+        else:
+            discount = self.cost_gamma ** steps.reshape(*tensordict.batch_size, 1).to(cost.dtype)
+        return cost + discount * alive * next_value
 
     def _td0(self, tensordict: TensorDictBase, rewards: Tensor, next_value: Tensor) -> Tensor:
         """torchrl's TD(0) estimate for several signals at once (one column per signal)."""

@@ -232,6 +232,7 @@ def build_sac_agent(algo: AlgoConfig, nets: Networks, compile_fn: CompileFn | No
         entropy_rescaling=algo.entropy_rescaling,
         cost_critic_read=algo.cost_critic_read,
         cost_nonnegative=algo.cost_nonnegative,
+        cost_gamma=algo.cost_gamma,
         lagrangian_init=algo.lagrangian_init if constrained else 0.0,
     )
     loss.make_value_estimator(gamma=algo.gamma)
@@ -562,7 +563,9 @@ def build_updates(
     # Labels describe their own step: n-step keeps them at t (a graded one as the binary one).
     keep = ["safe", probe_label_key(algo)[-1]]
     nstep = (
-        make_nstep_transform(algo.n_step, algo.gamma, keep_keys=tuple(keep))
+        make_nstep_transform(
+            algo.n_step, algo.gamma, keep_keys=tuple(keep), cost_gamma=algo.cost_gamma
+        )
         if algo.n_step > 1
         else None
     )

@@ -242,6 +242,8 @@ class AlgoConfig:
     # How the pair is read in the cost targets and the actor loss: min (FSRL), max or mean.
     cost_critic_read: str = "min"
     cost_nonnegative: bool = False  # clamp the cost value at 0 in its target and actor read
+    # The cost critics' own discount (and the n-step cost sums'); None: gamma (FSRL).
+    cost_gamma: float | None = None
     # With rescaling: divide the entropy term by 1 + lambda too (FSRL); false keeps alpha's
     # term out of the rescaling, so auto alpha does not grow with lambda.
     entropy_rescaling: bool = True
@@ -306,6 +308,8 @@ class AlgoConfig:
                     "the PID's bound is algo.pid.penalty_max",
                 )
         _check_choice(f"{path}.cost_critic_read", self.cost_critic_read, COST_CRITIC_READS)
+        if self.cost_gamma is not None:
+            _check_range(f"{path}.cost_gamma", self.cost_gamma, 0.0, 1.0)
         _check_range(f"{path}.gamma", self.gamma, 0.0, 1.0)
         _check_range(f"{path}.tau", self.tau, 0.0, 1.0, low_inclusive=False)
         _check_range(f"{path}.n_step", self.n_step, 1)

@@ -491,7 +491,12 @@ class Trainer:
         if self.recent_episodes is None:
             return {}
         loss = self.agent.loss
-        row = critic_calibration(loss, list(self.recent_episodes.episodes), self.cfg.algo.gamma)
+        row = critic_calibration(
+            loss,
+            list(self.recent_episodes.episodes),
+            self.cfg.algo.gamma,
+            cost_gamma=self.cfg.algo.cost_gamma,
+        )
         storage = self.replay_buffer.storage
         if len(storage) == 0:
             return {**row, "grad/entropy": math.nan, "grad/reward": math.nan, "grad/cost": math.nan}
