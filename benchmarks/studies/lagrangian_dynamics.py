@@ -179,7 +179,9 @@ def plant_settings() -> dict[str, Callable[[float], object]]:
     made = {}
     with initialize_config_dir(config_dir=str(REPO / "configs"), version_base="1.3"):
         for name, overrides in settings.items():
-            overrides = ["algo=sac_lag", *BASE_OVERRIDES, *overrides]
+            # experiment=paper: the controllers as the paper's runs build them (the default
+            # experiment, quick, has a learned multiplier of its own rate).
+            overrides = ["experiment=paper", "algo=sac_lag", *BASE_OVERRIDES, *overrides]
             cfg = validate(compose(config_name="train", overrides=overrides))
             made[name] = lambda limit, algo=cfg.algo: build_lagrangian(algo, limit)
     return made
