@@ -333,3 +333,23 @@ def test_a_run_that_cannot_learn_is_refused(compose):
     # Too few stored transitions for one batch is refused as well.
     with pytest.raises(ConfigError, match="no gradient step"):
         validate(compose("experiment=tiny", "collector.total_frames=200", "algo.batch_size=200"))
+
+
+def test_safe_preset_reads_the_task_registry(compose):
+    # experiment=safe takes a task's own values (TaskSpec.safe, benchmark_cost_limit) where the
+    # registry has them, its defaults elsewhere; a command-line value still wins.
+    from s3rl_torchrl.envs import get_task
+
+    goal = validate(compose("experiment=safe", "task=SafetyPointGoal1-v0"))
+    spec = get_task("SafetyPointGoal1-v0")
+    assert goal.algo.lagrangian_lr == spec.safe.lagrangian_lr == 3e-6
+    assert goal.algo.lagrangian_warmup_frames == spec.safe.lagrangian_warmup_frames == 100_000
+    assert goal.task.cost_limit == spec.benchmark_cost_limit == 25.0
+    ball = validate(compose("experiment=safe", "task=SafetyBallRun-v0"))
+    assert ball.algo.lagrangian_lr == 3e-4 and ball.task.cost_limit == 10.0
+    assert ball.algo.lagrangian_warmup_frames == ball.collector.init_random_frames == 2000
+    mine = validate(compose("experiment=safe", "task=SafetyPointGoal1-v0",
+                            "algo.lagrangian_lr=1e-5", "task.cost_limit=10"))
+    assert mine.algo.lagrangian_lr == 1e-5 and mine.task.cost_limit == 10.0
+    paper = validate(compose("experiment=paper", "task=SafetyPointGoal1-v0"))
+    assert paper.task.cost_limit == 10.0 and paper.algo.lagrangian_warmup_frames == 0
