@@ -22,6 +22,15 @@ to every run (e.g. a switch that the other version spells differently).
 ``compare`` holds each run's ``metrics.csv`` (every cell as text, the timing column
 ``eval/seconds`` aside) and ``final_eval.json`` (as text) of the two directories against each
 other, for every seed of a ``seeds=[...]`` run, and writes which are byte-identical.
+
+    python benchmarks/compare_refactor.py speed --trees <before tree> <after tree> \
+        [--rounds 2] [--frames 20000] [--out benchmarks/results/<name>.json]
+
+``speed`` measures ``benchmarks/train_throughput.py``'s quantity, the compiled S3RL recipe at
+the paper's settings on HalfCheetah (env steps per second after the first epoch, evaluation
+aside), for each tree in turn, ``--rounds`` times, interleaved (a fresh process each), and also
+the process CPU time over the same window (evaluation included): with other jobs on the cores,
+CPU time is what the code costs.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -147,6 +157,56 @@ def run(out: Path, critic_eval: str | None, extra: list[str], only: list[str] | 
     record_file.write_text(json.dumps(record, indent=2) + "\n")
 
 
+SPEED_CHILD = """
+import json, sys, tempfile, time
+sys.path.insert(0, sys.argv[1])
+from _report import recipe_config
+from s3rl_torchrl.trainer import Trainer
+task, frames = sys.argv[2], int(sys.argv[3])
+epoch = recipe_config("experiment=paper", f"task={task}").collector.frames_per_epoch
+frames = -(-frames // epoch) * epoch
+cfg = recipe_config("experiment=paper", f"task={task}", f"collector.total_frames={epoch + frames}",
+                    "compile=true", "threads=1")
+marks = []
+def on_epoch_end(trainer, row):
+    marks.append((row["frames"], time.perf_counter(), time.process_time(), row["eval/seconds"]))
+with tempfile.TemporaryDirectory() as run_dir:
+    trainer = Trainer(cfg, run_dir, on_epoch_end=on_epoch_end)
+    trainer.cfg.eval.final_episodes = 1
+    trainer.run()
+(f0, t0, c0, _), (f1, t1, c1, _) = marks[0], marks[-1]
+wall = t1 - t0 - sum(m[3] for m in marks[1:])
+print(json.dumps({"frames_measured": f1 - f0, "wall_seconds_without_eval": round(wall, 2),
+                  "env_steps_per_s": round((f1 - f0) / wall, 1),
+                  "cpu_seconds": round(c1 - c0, 2),
+                  "env_steps_per_cpu_s": round((f1 - f0) / (c1 - c0), 1),
+                  "gradient_steps": trainer.counters.grad_steps}))
+"""
+
+
+def speed(trees: list[Path], rounds: int, frames: int, task: str, out: Path | None) -> None:
+    bench = str(Path(__file__).resolve().parent)
+    rows = []
+    for round_index in range(rounds):
+        for tree in trees:
+            load = os.getloadavg()[0]
+            done = subprocess.run(
+                [sys.executable, "-c", SPEED_CHILD, bench, task, str(frames)],
+                check=True,
+                capture_output=True,
+                text=True,
+                env={**os.environ, "PYTHONPATH": str(tree)},
+                cwd=tempfile.gettempdir(),
+            )
+            row = {"tree": str(tree), "round": round_index, "load_before": round(load, 2)}
+            row |= json.loads(done.stdout.strip().splitlines()[-1])
+            row["load_after"] = round(os.getloadavg()[0], 2)
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    if out is not None:
+        write_report(out, {"task": task, "rows": rows})
+
+
 def _run_files(run_dir: Path) -> dict[str, Path]:
     """Every compared file of a run (``seed<k>/`` sub-directories of a group included)."""
     files = {}
@@ -236,9 +296,17 @@ def main() -> None:
     compare_parser.add_argument("before", type=Path)
     compare_parser.add_argument("after", type=Path)
     compare_parser.add_argument("--out", type=Path)
+    speed_parser = commands.add_parser("speed", help="train_throughput's measure, per tree")
+    speed_parser.add_argument("--trees", type=Path, nargs="+", required=True)
+    speed_parser.add_argument("--rounds", type=int, default=2)
+    speed_parser.add_argument("--frames", type=int, default=20_000)
+    speed_parser.add_argument("--task", default="SafetyHalfCheetahVelocity-v1")
+    speed_parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     if args.command == "run":
         run(args.out, args.critic_eval, args.extra, args.only)
+    elif args.command == "speed":
+        speed(args.trees, args.rounds, args.frames, args.task, args.out)
     elif not compare(args.before, args.after, args.out):
         raise SystemExit(1)
 

@@ -7,7 +7,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import LazyTensorStorage, ReplayBuffer
 
-from s3rl_torchrl.objectives import NStepTransform, make_nstep_transform, nstep_transition
+from s3rl_torchrl.transforms import NStepTransform, make_nstep_transform, nstep_transition
 
 GAMMA = 0.5  # powers of 1/2 keep the hand sums exact in float32
 

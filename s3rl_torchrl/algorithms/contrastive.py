@@ -4,6 +4,10 @@ Every ``T`` gradient steps of the RL algorithm (paper: ``enc_update_steps = 1000
 calls :meth:`ContrastivePhase.run`, which takes ``E`` InfoNCE steps (``enc_training_epoch =
 50``) with an optimizer that owns the policy encoder's parameters only: the actor head and the
 critics are not in the loss graph and not in the optimizer, so they stay frozen.
+
+Every family takes the phase alike, on its actor's policy encoder
+(:func:`build_contrastive_phase`), sampling triplets from the buffer the sampler of
+:func:`contrastive_sampler` partitions by the contrasted label.
 """
 
 from __future__ import annotations
@@ -11,13 +15,48 @@ from __future__ import annotations
 from typing import Any
 
 import torch
-from torchrl.data import ReplayBuffer
+from tensordict.nn import TensorDictModuleBase
+from tensordict.utils import NestedKey
+from torchrl.data import ReplayBuffer, TensorDictReplayBuffer
 from torchrl.objectives import SoftUpdate
 
+from s3rl_torchrl.algorithms.config import ContrastiveConfig
 from s3rl_torchrl.data.sampler import SafeUnsafeSampler
+from s3rl_torchrl.modules import get_policy_encoder
+from s3rl_torchrl.objectives.graded_infonce import GradedInfoNCELoss
 from s3rl_torchrl.objectives.infonce import SafetyInfoNCELoss
+from s3rl_torchrl.objectives.target_update import ForeachSoftUpdate
+from s3rl_torchrl.transforms import COST_TO_GO_KEY
 
-__all__ = ["ContrastivePhase"]
+__all__ = [
+    "DEFAULT_LABEL_BINS",
+    "LABEL_KEYS",
+    "SAFE_LABEL_KEY",
+    "ContrastivePhase",
+    "build_contrastive_phase",
+    "contrastive_sampler",
+    "label_bins",
+]
+
+# The binary safety label (CostLabel): the paper's contrastive phase and the binary probe.
+SAFE_LABEL_KEY: NestedKey = ("next", "safe")
+# Where each label of ContrastiveConfig.label is stored.
+LABEL_KEYS: dict[str, NestedKey] = {
+    "binary": SAFE_LABEL_KEY,
+    "cost_to_go": COST_TO_GO_KEY,
+    "margin": ("next", "margin"),
+}
+# The bins (sampler strata) of a graded label when contrastive_cfg.label_bins is null, in the
+# label's units. cost_to_go (gamma_c = 0.9, one cost per violating step): no cost in sight
+# (< 0.05: the next cost is ~30 or more steps away), a cost ahead, in or next to a violation
+# (>= 1), a sustained violation (>= 4). margin: violating (< 0), close to the limit, nearer
+# than 1, farther (metres for the Goal tasks, the speed's units for the velocity tasks).
+DEFAULT_LABEL_BINS = {"cost_to_go": (0.05, 1.0, 4.0), "margin": (0.0, 0.5, 1.0)}
+
+
+def label_bins(cfg: ContrastiveConfig, label: str) -> tuple[float, ...]:
+    """The bins of a graded label: ``cfg.label_bins``, else the label's default."""
+    return DEFAULT_LABEL_BINS[label] if cfg.label_bins is None else tuple(cfg.label_bins)
 
 
 class ContrastivePhase:
@@ -151,3 +190,30 @@ class ContrastivePhase:
         self.optimizer.load_state_dict(state_dict["optimizer"])
         self.num_runs = int(state_dict["num_runs"])
         self.num_skipped = int(state_dict["num_skipped"])
+
+
+def contrastive_sampler(cfg: ContrastiveConfig, contrastive: bool) -> SafeUnsafeSampler:
+    """The sampler partitions the buffer by the label the contrastive phase contrasts: safe /
+    unsafe (also without the phase), or the bins of a graded label."""
+    if not contrastive or not cfg.graded:
+        return SafeUnsafeSampler(SAFE_LABEL_KEY)
+    return SafeUnsafeSampler(LABEL_KEYS[cfg.label], bin_edges=label_bins(cfg, cfg.label))
+
+
+def build_contrastive_phase(
+    cfg: ContrastiveConfig, actor: TensorDictModuleBase, labelled: TensorDictReplayBuffer
+) -> ContrastivePhase:
+    """S3RL's phase on the actor's policy encoder, sampling triplets from ``labelled`` (the
+    replay buffer, or the on-policy FIFO of recent labelled states)."""
+    encoder = get_policy_encoder(actor)
+    momentum = cfg.momentum_tau is not None
+    if cfg.graded:
+        infonce = GradedInfoNCELoss(
+            encoder, temperature=cfg.temperature, positives=cfg.positives, momentum_encoder=momentum
+        )
+        infonce.set_keys(label=LABEL_KEYS[cfg.label])
+    else:
+        infonce = SafetyInfoNCELoss(encoder, temperature=cfg.temperature, momentum_encoder=momentum)
+    view = SafeUnsafeSampler.contrastive_view(labelled, cfg.batch_size)
+    updater = ForeachSoftUpdate(infonce, tau=cfg.momentum_tau) if momentum else None
+    return ContrastivePhase(infonce, view, cfg.lr, num_steps=cfg.steps, target_updater=updater)

@@ -12,10 +12,10 @@ from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.modules import MLP, ValueOperator
 from torchrl.objectives import SoftUpdate
 
+from s3rl_torchrl.algorithms import ContrastivePhase
 from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.modules import build_s3rl_actor, get_policy_encoder
 from s3rl_torchrl.objectives import SafetyInfoNCELoss
-from s3rl_torchrl.trainer import ContrastivePhase
 
 # The actor of tests/modules/test_actor.py (5 observations, 3 bounded actions).
 ACTION_SPEC = Bounded(torch.tensor([-1.0, 0.0, -3.0]), torch.tensor([1.0, 2.0, -1.0]), shape=(3,))

@@ -35,7 +35,8 @@ import torch.distributions.normal as _normal
 from tensordict import TensorDict, TensorDictBase
 from torch import Tensor
 
-from s3rl_torchrl.objectives.sac_lag import SACLagLoss
+from s3rl_torchrl.algorithms.sac import joint_update, sac_parameter_groups
+from s3rl_torchrl.objectives import SACLagLoss
 
 __all__ = ["StackedSACLag"]
 
@@ -103,13 +104,29 @@ def _template_loss(loss: SACLagLoss) -> SACLagLoss:
 
     Plain attribute reads, nothing swapped into modules: ``TensorDict.to_module`` on a whole
     loss breaks ``torch.compile``'s graph inside ``vmap`` (then the whole step runs eager).
+    A parameter tensordict read inside the ``vmap`` over agents gets back the batch size it has
+    in the loss (``[N]``, the critics of a signal): the loss maps its critics over it.
     """
+    batch_sizes = {
+        name: getattr(loss, name).batch_size
+        for name in PER_AGENT
+        if isinstance(getattr(loss, name, None), TensorDictBase)
+    }
+
+    def params(self, name: str, detach: bool = False):
+        value = self._current.params.get(name)
+        if name in batch_sizes:
+            value = value.detach() if detach else value
+            value.batch_size = batch_sizes[name]
+        elif detach:
+            value = value.detach()
+        return value
 
     def read(name):
-        return property(lambda self: self._current.params.get(name))
+        return property(lambda self: params(self, name))
 
     def detached(name):
-        return property(lambda self: self._current.params.get(name).detach())
+        return property(lambda self: params(self, name, detach=True))
 
     namespace = {name: read(name) for name in PER_AGENT}
     # SACLoss caches these as attributes; here they are views of this call's tensors.
@@ -166,7 +183,7 @@ class StackedSACLag:
                 name = key[0] if isinstance(key, tuple) else key
                 if name not in PER_AGENT and not torch.equal(td.get(key), per_agent[0].get(key)):
                     raise ValueError(f"the losses differ in {key}, which StackedSACLag shares")
-        stacked = {}
+        stacked, stack_of = {}, {}
         for key in keys:
             if (key[0] if isinstance(key, tuple) else key) not in PER_AGENT:
                 continue
@@ -174,28 +191,19 @@ class StackedSACLag:
             value = torch.stack([leaf.detach() for leaf in leaves])
             if isinstance(leaves[0], torch.nn.Parameter):
                 value = torch.nn.Parameter(value, requires_grad=leaves[0].requires_grad)
-            stacked[key] = value
+            stacked[key], stack_of[id(leaves[0])] = value, value
             for k, leaf in enumerate(leaves):
                 # Same tensor object, storage now a slice of the stack: every holder of it (the
                 # actor module, the contrastive optimizer, the loss) sees the group's updates.
                 leaf.data = value.data[k]
         self.params = TensorDict(stacked, batch_size=[self.num_agents])
 
-        def stacked_leaves(name: str) -> list[Tensor]:
-            # In the order of the loss's own tensordict (make_sac_lag_optimizers' order).
-            keys = getattr(losses[0], name).keys(True, True)
-            return [self.params.get((name, *_as_tuple(key))) for key in keys]
-
-        # The parameter groups of make_sac_lag_optimizers, in its order: each agent's slice of
-        # an optimizer state is then that agent's single-run optimizer state.
-        template = self._template
+        # The single run's parameter groups (sac_parameter_groups), each tensor replaced by its
+        # stack: each agent's slice of an optimizer state is then its single-run state.
         self.param_groups = {
-            "actor": stacked_leaves("actor_network_params"),
-            "critic": stacked_leaves("qvalue_network_params")
-            + (stacked_leaves("cost_qvalue_network_params") if template.num_costs else []),
+            name: [stack_of[id(tensor)] for tensor in tensors]
+            for name, tensors in sac_parameter_groups(losses[0]).items()
         }
-        if isinstance(template.log_alpha, torch.nn.Parameter):
-            self.param_groups["alpha"] = [self.params.get("log_alpha")]
         rates = {"actor": actor_lr, "critic": critic_lr, "alpha": alpha_lr}
         self.optimizers = {
             name: torch.optim.Adam(params, lr=rates[name], fused=True)
@@ -236,16 +244,12 @@ class StackedSACLag:
         """One joint gradient step of every agent (the paper's Algorithm 3, as the single-seed
         loop's ``update_order="joint"``): one forward, one backward of the SUM of every agent's
         summed losses, every optimiser, the target update. Returns the detached losses."""
-        losses = self.loss(batches, noise)
-        total = sum(v.sum() for k, v in losses.items() if k.startswith("loss_"))
-        for optimizer in self.optimizers.values():
-            optimizer.zero_grad(set_to_none=True)
-        total.backward()
-        for optimizer in self.optimizers.values():
-            optimizer.step()
-        with torch.no_grad():
-            torch._foreach_lerp_(self._targets, self._sources, self._tau)
-        return losses.detach()
+        return joint_update(self.loss(batches, noise), self.optimizers.values(), self._lerp_targets)
+
+    @torch.no_grad()
+    def _lerp_targets(self) -> None:
+        """Every agent's target critics, one elementwise lerp (as ``ForeachSoftUpdate``)."""
+        torch._foreach_lerp_(self._targets, self._sources, self._tau)
 
     # ------------------------------------------------------------------ per-agent state
     def optimizer_state(self, agent: int) -> dict[str, dict]:
