@@ -158,12 +158,22 @@ def compile_loss(fn: Callable) -> Callable:
     stay). What it no longer sees is a Python attribute of a loss or network reassigned after
     the first call (e.g. ``loss.fixed_alpha = ...``, a module swapped in): rebuild the loss, or
     call ``torch._dynamo.reset()``, after such a change.
+
+    No guard on the length of tensordict's memo of type checks (``_TENSORCLASS_MEMO``) either:
+    it grows whenever tensordict checks a type for the first time, e.g. ``tuple`` in the first
+    eager ``vmap`` (the critic diagnostics' at the first epoch's end). The loss then recompiled,
+    and every later step checked both entries' guards: 6.0 instead of 4.7 ms per step of the
+    paper's recipe. No result depends on that length.
     """
     return torch.compile(
-        fn,
-        isolate_recompiles=True,
-        options={"guard_filter_fn": torch.compiler.skip_guard_on_all_nn_modules_unsafe},
+        fn, isolate_recompiles=True, options={"guard_filter_fn": _compiled_loss_guards}
     )
+
+
+def _compiled_loss_guards(entries) -> list[bool]:
+    """The guards :func:`compile_loss` keeps (its docstring says which it drops, and why)."""
+    keep = torch.compiler.skip_guard_on_all_nn_modules_unsafe(entries)
+    return [kept and "_TENSORCLASS_MEMO" not in entry.name for kept, entry in zip(keep, entries)]
 
 
 def _tensordict(saved: dict[str, Any]) -> TensorDict:
