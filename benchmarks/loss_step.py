@@ -13,11 +13,13 @@ one full step (critics, actor, alpha, targets):
 - joint (torchrl's usual loop): ``loss(batch)``, one backward of the summed ``loss_*`` entries,
   the three optimiser steps, the soft update;
 - ``*_fsrl``: FSRL's order, critic loss -> critic step -> actor loss (with the updated critics)
-  -> actor step -> alpha step -> soft update (:func:`s3rl_torchrl.objectives.sac_lag_update`).
+  -> actor step -> alpha step -> soft update (:func:`s3rl_torchrl.algorithms.sac_lag_update`).
 
 Variants: ``sac`` / ``sac_fsrl`` (torchrl ``SACLoss``, loss_function="l2", alpha_init=0.005),
-``sac_lag`` / ``sac_lag_fsrl`` (``SACLagLoss`` as built by default: ``critic_eval="batched_mlp"``),
-and, eager only, ``sac_lag_fused_vmap`` and ``sac_lag_vmap`` (the other ``critic_eval`` modes).
+``sac_lag`` / ``sac_lag_fsrl`` (``SACLagLoss``). The ``critic_eval`` variants
+(``sac_lag_fused_vmap``, ``sac_lag_vmap``) measured the loss's other critic evaluations, which
+it no longer has (it evaluates its critics as ``SACLoss`` does, with ``vmap``); their results
+stay in ``benchmarks/results/``.
 
 All variants and modes of one env run in one fresh process, timed in interleaved rounds (each
 round runs every configuration for ``--steps`` steps) so that load from other processes hits
@@ -46,19 +48,14 @@ from tensordict import TensorDict
 from torchrl.data import Bounded
 from torchrl.objectives import SACLoss
 
+from s3rl_torchrl.algorithms import make_sac_lag_optimizers, sac_lag_update
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network, build_s3rl_actor
-from s3rl_torchrl.objectives import (
-    ForeachSoftUpdate,
-    SACLagLoss,
-    make_sac_lag_optimizers,
-    sac_lag_update,
-)
+from s3rl_torchrl.objectives import ForeachSoftUpdate, SACLagLoss
 from s3rl_torchrl.trainer import compile_loss
 
 ENVS = {"halfcheetah": (17, 6), "humanoid": (376, 17)}
-VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl", "sac_lag_fused_vmap", "sac_lag_vmap")
+VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl")
 COMPILE_VARIANTS = ("sac", "sac_lag", "sac_fsrl", "sac_lag_fsrl")
-CRITIC_EVAL = {"sac_lag_fused_vmap": "fused_vmap", "sac_lag_vmap": "vmap"}
 BATCH = 256
 HIDDEN = (128, 128)
 
@@ -95,8 +92,7 @@ def make_loss(variant: str, obs_dim: int, act_dim: int):
     critics = [build_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
     if variant.startswith("sac_lag"):
         costs = [build_cost_qvalue_network(obs_dim, act_dim, HIDDEN) for _ in range(2)]
-        mode = CRITIC_EVAL.get(variant, "auto")
-        loss = SACLagLoss(actor, critics, costs, num_costs=1, critic_eval=mode)
+        loss = SACLagLoss(actor, critics, costs, num_costs=1)
         loss.lagrangian = 0.3
     else:
         loss = SACLoss(actor, critics, loss_function="l2", alpha_init=0.005)
@@ -119,12 +115,10 @@ class Stepper:
         if not variant.endswith("_fsrl"):
             self.forward = wrap(loss)
             self.step = self.joint_step
-        elif isinstance(loss, SACLagLoss):
-            self.critic_loss, self.actor_loss = wrap(loss.critic_loss), wrap(loss.actor_loss)
-            self.step = self.sac_lag_fsrl_step
         else:
             self.critic_loss, self.actor_loss = wrap(loss.qvalue_v2_loss), wrap(loss.actor_loss)
-            self.step = self.sac_fsrl_step
+            lag = isinstance(loss, SACLagLoss)
+            self.step = self.sac_lag_fsrl_step if lag else self.sac_fsrl_step
 
     def fresh_batch(self) -> TensorDict:
         # A new batch object each step, as from a replay buffer: the losses write `td_error`
@@ -135,7 +129,7 @@ class Stepper:
         out = self.forward(self.fresh_batch())
         total = sum(value for key, value in out.items() if key.startswith("loss_"))
         total.backward()
-        for optimizer in self.optimizers:
+        for optimizer in self.optimizers.values():
             optimizer.step()
             optimizer.zero_grad(set_to_none=True)
         self.updater.step()
@@ -155,17 +149,17 @@ class Stepper:
         opt = self.optimizers
         batch = self.fresh_batch()
         loss_qvalue, _ = self.critic_loss(batch)
-        opt.critic.zero_grad(set_to_none=True)
+        opt["critic"].zero_grad(set_to_none=True)
         loss_qvalue.backward()
-        opt.critic.step()
+        opt["critic"].step()
         loss_actor, metadata = self.actor_loss(batch)
-        opt.actor.zero_grad(set_to_none=True)
+        opt["actor"].zero_grad(set_to_none=True)
         loss_actor.backward()
-        opt.actor.step()
+        opt["actor"].step()
         loss_alpha = self.loss.alpha_loss(metadata["log_prob"]).mean()
-        opt.alpha.zero_grad(set_to_none=True)
+        opt["alpha"].zero_grad(set_to_none=True)
         loss_alpha.backward()
-        opt.alpha.step()
+        opt["alpha"].step()
         self.updater.step()
 
 

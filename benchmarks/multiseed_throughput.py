@@ -192,7 +192,7 @@ def measure_steps(ks: list[int], compiled: bool, threads: int, task: str) -> lis
     """The gradient step alone: single-seed joint step vs StackedSACLag.update, interleaved."""
     import torch
 
-    from s3rl_torchrl.objectives.stacked import StackedSACLag, draw_noise
+    from s3rl_torchrl.algorithms.stacked import StackedSACLag, draw_noise
     from s3rl_torchrl.trainer.loop import compile_loss
 
     torch.set_num_threads(threads)

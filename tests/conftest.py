@@ -4,9 +4,41 @@ from __future__ import annotations
 
 import os
 
+import pytest
 import torch
 
 # Under pytest-xdist (make test: -n 2) each worker keeps to one intra-op thread: two workers
 # with two threads each on two cores stall one another (docs/benchmarks.md, threads).
 if os.environ.get("PYTEST_XDIST_WORKER"):
     torch.set_num_threads(1)
+
+
+# Small fixtures that shrink experiments to seconds (BenchMARL style), for every area's tests.
+def compose_train(*overrides: str):
+    """The Hydra config ``s3rl-train`` would get with these overrides (not validated)."""
+    from hydra import compose, initialize_config_dir
+
+    from s3rl_torchrl.recipes import config_dir
+    from s3rl_torchrl.trainer import register_configs
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        return compose(config_name="train", overrides=list(overrides))
+
+
+@pytest.fixture
+def compose():
+    """``compose(*overrides)``: the Hydra config ``s3rl-train`` would get."""
+    return compose_train
+
+
+@pytest.fixture
+def tiny_config():
+    """A validated ``experiment=tiny`` config; extra overrides as arguments."""
+
+    from s3rl_torchrl.trainer import validate
+
+    def make(*overrides: str):
+        return validate(compose_train("experiment=tiny", *overrides))
+
+    return make

@@ -25,8 +25,9 @@ from pathlib import Path
 import _paths  # noqa: F401  (benchmarks/ on sys.path)
 from _report import archive_path, recipe_config, write_report
 
+from s3rl_torchrl.algorithms import family_of
 from s3rl_torchrl.trainer import Trainer
-from s3rl_torchrl.trainer.config import ALGO_FAMILIES, ALGO_NAMES
+from s3rl_torchrl.trainer.config import ALGO_NAMES
 
 
 def _mark(trainer: Trainer) -> tuple[int, int, float, float]:
@@ -54,7 +55,7 @@ class MarkedTrainer(Trainer):
 
 def measure(algo: str, task: str, frames: int) -> dict:
     probe = recipe_config(f"algo={algo}")
-    schedule = probe.algo.schedule(probe.collector)
+    schedule = family_of(probe.algo).schedule(probe.collector, probe.algo)
     batch = probe.collector.frames_per_batch
     # Frames up to the end of the first collect that learns, then the measured window.
     first = next(k for k in range(batch, 10**9, batch) if k >= schedule.warmup_frames())
@@ -78,7 +79,7 @@ def measure(algo: str, task: str, frames: int) -> dict:
     wall, cpu = end[2] - start[2], end[3] - start[3]
     return {
         "algo": algo,
-        "family": ALGO_FAMILIES[algo],
+        "family": family_of(algo).name,
         "schedule": schedule.name,
         "task": task,
         "compile": cfg.compile,

@@ -170,8 +170,8 @@ def plant_settings() -> dict[str, Callable[[float], object]]:
     learned multiplier with a 10x larger step."""
     from hydra import compose, initialize_config_dir
 
+    from s3rl_torchrl.algorithms import build_lagrangian
     from s3rl_torchrl.trainer import register_configs, validate
-    from s3rl_torchrl.trainer.builders import build_lagrangian
 
     register_configs()
     settings = {name: SETTINGS[name] for name in ("fsrl", "pid_ema", "pid_ema_ki0.01", "learned")}

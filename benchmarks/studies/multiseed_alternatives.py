@@ -30,8 +30,8 @@ from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 from tensordict import TensorDict
 
+from s3rl_torchrl.algorithms.stacked import StackedSACLag, _normal_noise, draw_noise
 from s3rl_torchrl.envs.make import make_env
-from s3rl_torchrl.objectives.stacked import StackedSACLag, _normal_noise, draw_noise
 from s3rl_torchrl.trainer.loop import compile_loss
 
 TASK = "SafetyHalfCheetahVelocity-v1"

@@ -25,21 +25,20 @@ import torch
 from _report import archive_path, interleaved_rounds, write_report
 from multiseed_throughput import env_rows, paper_agents, paper_config
 
+from s3rl_torchrl.algorithms import SACLagStep
 from s3rl_torchrl.trainer import compile_loss
-from s3rl_torchrl.trainer.builders import _sac_update
 
 
 def foreach_adams(optimizers):
     """The same parameter groups and settings in ``foreach`` Adams (compilable)."""
-    return [
-        torch.optim.Adam(
+    return {
+        name: torch.optim.Adam(
             [{k: v for k, v in g.items() if k not in ("fused", "foreach")} for g in o.param_groups],
             fused=False,
             foreach=True,
         )
-        for o in optimizers
-        if o is not None
-    ]
+        for name, o in optimizers.items()
+    }
 
 
 def main() -> None:
@@ -53,12 +52,12 @@ def main() -> None:
     ((recipe_agent, env),) = paper_agents(cfg, 1, compile_first=compile_loss)
     ((whole_agent, _),) = paper_agents(cfg, 1)
     batch = env_rows(cfg, env, cfg.algo.batch_size)
-    loss, target_updater = whole_agent.loss, whole_agent.target_updater
+    loss, target_updater = whole_agent.loss, whole_agent.update.target_updater
     optimizers = foreach_adams(whole_agent.optimizers)
 
     # The recipe's own gradient step (loss, backward, optimizers, target update), uncompiled
     # inside, so that one torch.compile below takes all of it.
-    whole_step = _sac_update(loss, optimizers, target_updater, cfg.algo.update_order, lambda fn: fn)
+    whole_step = SACLagStep(loss, optimizers, target_updater, cfg.algo.update_order)
 
     torch._dynamo.config.compiled_autograd = True
     explained = torch._dynamo.explain(whole_step)(batch.copy())

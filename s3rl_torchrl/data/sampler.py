@@ -232,7 +232,7 @@ class SafeUnsafeSampler(Sampler):
 
     Each slot holds one transition. A collector's ``[num_envs, time]`` batch goes in
     unflattened when the buffer has an n-step transform
-    (:func:`~s3rl_torchrl.objectives.make_nstep_transform`, which builds each env's windows
+    (:func:`~s3rl_torchrl.transforms.make_nstep_transform`, which builds each env's windows
     along time and then flattens), and flattened (``data.reshape(-1)``) when it has none.
 
     Modes:

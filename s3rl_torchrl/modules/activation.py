@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-__all__ = ["ReLU", "relu"]
+__all__ = ["ACTIVATIONS", "ReLU", "relu"]
 
 
 def _relu_without_mask(x: Tensor) -> Tensor:
@@ -50,3 +50,12 @@ class ReLU(nn.ReLU):
 
     def forward(self, input: Tensor) -> Tensor:
         return relu(input, inplace=self.inplace)
+
+
+#: The activations a run's networks can use (``network.activation``), by config name.
+ACTIVATIONS: dict[str, type[nn.Module]] = {
+    "relu": ReLU,  # nn.ReLU that stays fast under torch.compile (above)
+    "tanh": nn.Tanh,
+    "elu": nn.ELU,
+    "silu": nn.SiLU,
+}

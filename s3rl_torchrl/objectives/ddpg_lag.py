@@ -13,14 +13,13 @@ deterministic actor ``mu`` and target copies ``mu'``, ``Q_r'``, ``Q_c'``:
 as in FSRL's ``fsrl/policy/ddpg_lag.py`` (``critics_loss``, ``policy_loss``, with the
 ``safety_loss`` and rescaling of ``fsrl/policy/lagrangian_base.py``): one critic per signal (no
 double Q), a target actor and target critics (``tau = 0.05``), n-step targets (``n_step = 2``;
-here from :func:`~s3rl_torchrl.objectives.make_nstep_transform`, ``k = steps_to_next_obs``).
+here from :func:`~s3rl_torchrl.transforms.make_nstep_transform`, ``k = steps_to_next_obs``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import torch
 from tensordict import TensorDict, TensorDictBase, TensorDictParams
@@ -32,12 +31,7 @@ from torchrl.objectives.utils import ValueEstimators, _cache_values, distance_lo
 
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
-__all__ = [
-    "DDPGLagLoss",
-    "DDPGLagOptimizers",
-    "ddpg_lag_update",
-    "make_ddpg_lag_optimizers",
-]
+__all__ = ["DDPGLagLoss"]
 
 
 def _next(key: NestedKey) -> tuple[str, ...]:
@@ -316,74 +310,3 @@ class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):
             "actor_network_params",
         )
         return td_out
-
-
-class DDPGLagOptimizers(NamedTuple):
-    """FSRL's two Adam optimisers: actor, and critics (reward and cost together)."""
-
-    actor: torch.optim.Optimizer
-    critic: torch.optim.Optimizer
-
-
-def make_ddpg_lag_optimizers(
-    loss: DDPGLoss, actor_lr: float = 5e-4, critic_lr: float = 1e-3, **adam_kwargs
-) -> DDPGLagOptimizers:
-    """Adam optimisers over the loss's parameters (defaults: FSRL's ``fsrl/config/ddpgl_cfg.py``).
-
-    Works for ``DDPGLagLoss`` and torchrl's ``DDPGLoss``.
-    """
-    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
-        if not lr > 0:
-            raise ValueError(f"{name} must be > 0, got {lr!r}.")
-    def trainable(params) -> list[Tensor]:  # skip buffers (e.g. the actor's action bounds)
-        return [p for p in params.values(True, True) if p.requires_grad]
-
-    critic_params = trainable(loss.value_network_params)
-    if isinstance(loss, DDPGLagLoss):
-        critic_params += trainable(loss.cost_value_network_params)
-    return DDPGLagOptimizers(
-        actor=torch.optim.Adam(trainable(loss.actor_network_params), lr=actor_lr, **adam_kwargs),
-        critic=torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
-    )
-
-
-def ddpg_lag_update(
-    loss: DDPGLoss,
-    batch: TensorDictBase,
-    optimizers: DDPGLagOptimizers,
-    target_updater=None,
-) -> TensorDictBase:
-    """One gradient step in FSRL's order (``DDPGLagrangian.learn``): critics, actor, targets.
-
-    The actor loss sees the critics *after* their step. Returns the detached losses and the
-    diagnostics ``reward_q``, ``cost_q``, ``lagrangian``. With torchrl's ``DDPGLoss`` (no cost
-    critic, unconstrained DDPG) it is the same step without the cost entries.
-    """
-    constrained = isinstance(loss, DDPGLagLoss)
-    if constrained:
-        critic = loss.critic_loss(batch)
-        critic_total = critic["loss_value"] + critic["loss_cost_value"]
-    else:
-        loss_value, _ = loss.loss_value(batch)
-        critic = {"loss_value": loss_value}
-        critic_total = loss_value
-    optimizers.critic.zero_grad(set_to_none=True)
-    critic_total.backward()
-    optimizers.critic.step()
-
-    loss_actor, metadata = loss.loss_actor(batch)
-    optimizers.actor.zero_grad(set_to_none=True)
-    loss_actor.backward()
-    optimizers.actor.step()
-    if target_updater is not None:
-        target_updater.step()
-    out = {
-        "loss_actor": loss_actor.detach(),
-        **{key: value.detach() for key, value in critic.items()},
-        **metadata,
-    }
-    if constrained:
-        out["lagrangian"] = loss.lagrangian.detach().clone()
-    else:  # DDPGLoss's actor loss is -Q_r(s, mu(s)) and returns no diagnostics
-        out["reward_q"] = -loss_actor.detach()
-    return TensorDict(out, batch_size=[])

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import torch
 from tensordict import TensorDictBase, TensorDictParams
@@ -43,15 +43,10 @@ from torchrl.objectives.value import GAE
 
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
-__all__ = [
-    "PPOLagLoss",
-    "PPOLagOptimizers",
-    "compute_ppo_advantages",
-    "make_ppo_lag_optimizers",
-    "ppo_lag_update",
-]
+__all__ = ["COST_SURROGATES", "PPOLagLoss"]
 
-_COST_SURROGATES = ("unclipped", "clipped")
+#: The cost term of the policy loss: FSRL's unclipped one or OmniSafe's clipped surrogate.
+COST_SURROGATES = ("unclipped", "clipped")
 
 
 def _next(key: NestedKey) -> tuple[str, ...]:
@@ -143,10 +138,10 @@ class PPOLagLoss(LagrangianBufferMixin, ClipPPOLoss):
         normalize_advantage: bool = True,
         **kwargs,
     ) -> None:
-        if cost_surrogate not in _COST_SURROGATES:
+        if cost_surrogate not in COST_SURROGATES:
             raise ValueError(
                 f"Unknown cost_surrogate {cost_surrogate!r}; valid choices are "
-                f"{', '.join(map(repr, _COST_SURROGATES))}."
+                f"{', '.join(map(repr, COST_SURROGATES))}."
             )
         if cost_critic_network is None or critic_network is None:
             raise ValueError("PPOLagLoss needs a critic_network and a cost_critic_network.")
@@ -360,73 +355,3 @@ class PPOLagLoss(LagrangianBufferMixin, ClipPPOLoss):
             "target_critic_network_params",
         )
         return td_out
-
-
-class PPOLagOptimizers(NamedTuple):
-    """Adam over the actor and Adam over the critics (reward and cost together).
-
-    FSRL has one Adam over actor and critics (``lr = 5e-4``); Adam is per-parameter, so two
-    optimisers with the same learning rate take the same steps as that one.
-    """
-
-    actor: torch.optim.Optimizer
-    critic: torch.optim.Optimizer
-
-
-def _trainable(params) -> list[Tensor]:  # skip buffers (e.g. the actor's action bounds)
-    return [p for p in params.values(True, True) if p.requires_grad]
-
-
-def make_ppo_lag_optimizers(
-    loss: ClipPPOLoss, actor_lr: float = 5e-4, critic_lr: float = 5e-4, **adam_kwargs
-) -> PPOLagOptimizers:
-    """Adam optimisers over the loss's parameters (FSRL's ``lr = 5e-4`` for both,
-    ``fsrl/config/ppol_cfg.py``). Works for ``PPOLagLoss`` and torchrl's ``ClipPPOLoss``."""
-    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
-        if not lr > 0:
-            raise ValueError(f"{name} must be > 0, got {lr!r}.")
-    critic_params = _trainable(loss.critic_network_params)
-    if isinstance(loss, PPOLagLoss):
-        critic_params += _trainable(loss.cost_critic_network_params)
-    return PPOLagOptimizers(
-        actor=torch.optim.Adam(_trainable(loss.actor_network_params), lr=actor_lr, **adam_kwargs),
-        critic=torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
-    )
-
-
-@torch.no_grad()
-def compute_ppo_advantages(loss: ClipPPOLoss, batch: TensorDictBase) -> TensorDictBase:
-    """GAE on a collected batch ``[*B, T]`` (time last), in place, before the PPO epochs: the
-    reward and cost advantages for ``PPOLagLoss`` (:meth:`PPOLagLoss.compute_advantages`),
-    the reward ones for torchrl's ``ClipPPOLoss`` (as its forward computes them)."""
-    if isinstance(loss, PPOLagLoss):
-        return loss.compute_advantages(batch)
-    loss.value_estimator(
-        batch,
-        params=loss.critic_network_params.detach(),
-        target_params=loss.target_critic_network_params,
-    )
-    return batch
-
-
-def ppo_lag_update(
-    loss: ClipPPOLoss,
-    batch: TensorDictBase,
-    optimizers: PPOLagOptimizers,
-    max_grad_norm: float | None = None,
-) -> TensorDictBase:
-    """One PPO minibatch step: the sum of the ``loss_*`` entries (policy, reward critic, and
-    the cost critic for ``PPOLagLoss``), one backward, the gradient norm of all parameters
-    clipped to ``max_grad_norm`` (FSRL/tianshou clip actor and critics together), then both
-    optimisers. Returns the detached losses and diagnostics."""
-    losses = loss(batch)
-    total = sum(value for key, value in losses.items() if key.startswith("loss_"))
-    for optimizer in optimizers:
-        optimizer.zero_grad(set_to_none=True)
-    total.backward()
-    if max_grad_norm is not None:
-        params = [p for opt in optimizers for group in opt.param_groups for p in group["params"]]
-        torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
-    for optimizer in optimizers:
-        optimizer.step()
-    return losses.detach()

@@ -39,9 +39,12 @@ def config_dir() -> Path:
 
 # Warnings of third-party code that a user of the recipes cannot act on, each matched exactly
 # (never all warnings). Their causes are not ours: tensordict reads a torch._dynamo option that
-# torch deprecated; Gymnasium's half_cheetah.xml (HalfCheetah-v4, the velocity task's robot)
-# uses MuJoCo's deprecated settotalmass attribute.
+# torch deprecated; torchrl's SACLoss (and SACLagLoss, which evaluates its critics the same
+# way) vmaps over locked parameter tensordicts, whose per-call copies tensordict locks, and
+# warns about it, under torch.compile; Gymnasium's half_cheetah.xml (HalfCheetah-v4, the
+# velocity task's robot) uses MuJoCo's deprecated settotalmass attribute.
 TENSORDICT_DYNAMO_OPTION = r"torch\._dynamo\.config\.inline_inbuilt_nn_modules is deprecated"
+TENSORDICT_COMPILED_LOCK = r"Using lock_\(\) inside a compiled graph"
 MUJOCO_SETTOTALMASS = "compiler attribute 'settotalmass' is deprecated"
 
 
@@ -52,6 +55,9 @@ def quiet_known_warnings() -> None:
 
     warnings.filterwarnings(
         "ignore", message=TENSORDICT_DYNAMO_OPTION, category=FutureWarning, module="tensordict"
+    )
+    warnings.filterwarnings(
+        "ignore", message=TENSORDICT_COMPILED_LOCK, category=UserWarning, module="tensordict"
     )
     previous = mujoco.get_mju_user_warning()
 

@@ -227,9 +227,8 @@ def _training_probe(group: RunGroup) -> tuple[MeanStd, MeanStd]:
 def _graded_probe(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     """The graded probe per group: the last logged ``probe/spearman`` and ``probe/r2``, with
     the label the contrastive phase was trained on and the label probed (the run's graded
-    label, else the cost-to-go: ``builders.probe_label``); empty if no run logged it."""
-    from s3rl_torchrl.trainer.builders import probe_label
-    from s3rl_torchrl.trainer.config import AlgoConfig, ContrastiveConfig
+    label, else the cost-to-go: ``hooks.labels.probed_label``); empty if no run logged it."""
+    from s3rl_torchrl.hooks.labels import probed_label
 
     rows = []
     for task, groups in by_task.items():
@@ -237,14 +236,10 @@ def _graded_probe(by_task: dict[str, list[RunGroup]], reference: str) -> list[st
             spearman, r2 = _last_logged(group, "probe/spearman"), _last_logged(group, "probe/r2")
             if spearman.n or r2.n:
                 algo = group.runs[0].config["algo"]
-                contrastive = ContrastiveConfig(
-                    label=algo.get("contrastive_cfg", {}).get("label", "binary")
-                )
+                label = algo.get("contrastive_cfg", {}).get("label", "binary")
                 contrastive_algo = bool(algo.get("contrastive", False))
-                probed = probe_label(
-                    AlgoConfig(contrastive=contrastive_algo, contrastive_cfg=contrastive)
-                )
-                trained = contrastive.label if contrastive_algo else "none"
+                probed = probed_label(contrastive_algo, label)
+                trained = label if contrastive_algo else "none"
                 rows.append([task, group.label, trained, probed,
                              str(max(spearman.n, r2.n)), _ms(spearman), _ms(r2)])
     if not rows:

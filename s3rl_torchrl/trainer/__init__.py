@@ -1,4 +1,5 @@
-"""Training and evaluation of S3RL, SAC-Lag and SAC: configs, builders, the loop, checkpoints.
+"""Training and evaluation of every algorithm: the run's config, builders, the loop, several
+seeds in one process, checkpoints and resume, evaluation.
 
 Use it from Python without Hydra::
 
@@ -8,23 +9,26 @@ Use it from Python without Hydra::
     result = train(cfg, "runs/hopper")
 """
 
-from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from s3rl_torchrl.trainer.config import (
+from s3rl_torchrl.algorithms import (
     AlgoConfig,
-    CollectorConfig,
     ConfigError,
     ContrastiveConfig,
+    ContrastivePhase,
+    PIDConfig,
+)
+from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from s3rl_torchrl.trainer.config import (
+    CollectorConfig,
+    DiagnosticsConfig,
     EvalConfig,
     EvalRunConfig,
     LoggerConfig,
     NetworkConfig,
-    PIDConfig,
     TaskConfig,
     TrainConfig,
     register_configs,
     validate,
 )
-from s3rl_torchrl.trainer.contrastive import ContrastivePhase
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
 from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, compile_loss, train
 from s3rl_torchrl.trainer.multiseed import MultiSeedResult, MultiSeedTrainer, train_seeds
@@ -37,6 +41,7 @@ __all__ = [
     "ContrastiveConfig",
     "ContrastivePhase",
     "Counters",
+    "DiagnosticsConfig",
     "EvalConfig",
     "EvalResult",
     "EvalRunConfig",

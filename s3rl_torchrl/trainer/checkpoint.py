@@ -464,9 +464,9 @@ def load_checkpoint(path: str | Path) -> tuple[dict[str, Any], Path]:
 def check_compatible(saved: dict[str, Any], current: dict[str, Any], keys: list[str]) -> None:
     """Fail clearly when a resumed run's config differs where the saved weights depend on it."""
 
-    def get(cfg: dict, dotted: str):
+    def get(cfg: dict, dotted: str):  # None where the family has no such field (PPO's n_step)
         for part in dotted.split("."):
-            cfg = cfg[part]
+            cfg = cfg.get(part) if isinstance(cfg, dict) else None
         return cfg
 
     diffs = [

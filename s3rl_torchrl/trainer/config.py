@@ -1,9 +1,16 @@
 """Typed configuration of a training run: one dataclass per component, stored in Hydra's
 ConfigStore so that every YAML under ``configs/`` is type-checked against it.
 
-Types are checked by OmegaConf when Hydra merges the YAMLs and overrides; values (ranges and
-choices) are checked by :func:`validate`, which every entry point calls before it builds
-anything, so a bad override fails with the field's name and what it accepts.
+The algorithm's part (``algo``) is its family's class (``s3rl_torchrl/algorithms/``:
+``SACConfig``, ``DDPGConfig``, ``PPOConfig``), which the algorithm's YAML picks through its
+registry entry (``/algo_defaults@_here_: <name>``). Types are checked by OmegaConf when Hydra
+merges the YAMLs and overrides; values (ranges and choices) are checked by :func:`validate`,
+which every entry point calls before it builds anything, so a bad override fails with the
+field's name and what it accepts.
+
+A config saved by an earlier version (a run's ``config.json``, a checkpoint's config) loads with
+:func:`saved_config_node`: its ``algo`` held every family's fields then, and the fields its
+family does not have are dropped (see there).
 """
 
 from __future__ import annotations
@@ -17,37 +24,30 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from s3rl_torchrl.algorithms.config import (
+    AlgoConfig,
+    ConfigError,
+    check_choice,
+    check_finite,
+    check_range,
+    fail,
+)
+from s3rl_torchrl.algorithms.registry import ALGORITHMS, family_of
+from s3rl_torchrl.algorithms.schedule import collector_batch_frames
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
-from s3rl_torchrl.objectives.graded_infonce import GRADED_POSITIVES
-from s3rl_torchrl.objectives.lagrangian import LAGRANGIAN_CADENCES
-from s3rl_torchrl.objectives.sac_lag import COST_CRITIC_READS
-from s3rl_torchrl.trainer.builders import FAMILIES
-from s3rl_torchrl.trainer.schedule import UpdateSchedule, collector_batch_frames
+from s3rl_torchrl.modules import ACTIVATIONS
 
-# The algorithm registry: `algo=<name>` (configs/algo/<name>.yaml) -> its family, whose entry in
-# builders.FAMILIES builds the actor, the loss and the gradient step and says when gradient
-# steps happen (trainer/schedule.py). Adding an algorithm of an existing family is one entry
-# here and one YAML.
-ALGO_FAMILIES = {
-    "s3rl": "sac",
-    "sac_lag": "sac",
-    "sac": "sac",
-    "s3rl_nolag": "sac",
-    "ddpg_lag": "ddpg",
-    "ddpg": "ddpg",
-    "s3rl_ddpg_lag": "ddpg",
-    "ppo_lag": "ppo",
-    "ppo": "ppo",
-    "s3rl_ppo_lag": "ppo",
-}
-ALGO_NAMES = tuple(ALGO_FAMILIES)
-# The algorithms without a Lagrange multiplier (their YAML sets `lagrangian: none`): a preset
-# that picks the controller (experiment=safe) leaves them unconstrained (`s3rl_lagrangian`).
-UNCONSTRAINED_ALGOS = ("sac", "s3rl_nolag", "ddpg", "ppo")
-COST_SURROGATES = ("unclipped", "clipped")
-LAGRANGIAN_CHOICES = ("pid", "learned", "none")
-UPDATE_ORDERS = ("joint", "fsrl")
-ACTIVATIONS = ("relu", "tanh", "elu", "silu")
+__all__ = [
+    "ConfigError",
+    "TrainConfig",
+    "register_configs",
+    "saved_config_node",
+    "saved_train_config",
+    "to_container",
+    "validate",
+]
+
+ALGO_NAMES = tuple(ALGORITHMS)
 LOGGER_BACKENDS = ("csv", "tensorboard", "wandb", "mlflow", "none")
 # backend -> (module it imports, the package extra that installs it)
 LOGGER_PACKAGES = {
@@ -56,17 +56,6 @@ LOGGER_PACKAGES = {
     "mlflow": ("mlflow", "mlflow"),
 }
 DEVICES = ("cpu", "cuda", "mps")
-# The contrastive phase's safety label (docs/representation.md): the paper's binary safe/unsafe
-# label, the discounted cost-to-go (transforms.CostToGo) or the task's margin (TaskSpec).
-CONTRASTIVE_LABELS = ("binary", "cost_to_go", "margin")
-
-
-class ConfigError(ValueError):
-    """A configuration value is out of range or not one of its choices."""
-
-
-def _fail(path: str, value: Any, allowed: str) -> None:
-    raise ConfigError(f"Invalid value {value!r} for '{path}': {allowed}.")
 
 
 def _check_cpp_compiler(path: str) -> None:
@@ -79,44 +68,12 @@ def _check_cpp_compiler(path: str) -> None:
         get_cpp_compiler()
     except InvalidCxxCompiler:
         tried = [cxx for cxx in inductor_config.cpp.cxx if cxx]
-        _fail(
+        fail(
             path,
             True,
             f"torch.compile on CPU needs a C++ compiler and none of {tried} runs (or set CXX); "
             "install one (Debian/Ubuntu: apt-get install g++) or pass compile=false",
         )
-
-
-def _check_finite(obj: Any, path: str) -> None:
-    """Every float field of a config (nested dataclasses included) is a finite number: NaN
-    passes every range check (its comparisons are all false) and would fail deep inside."""
-    for f in fields(obj):
-        value, name = getattr(obj, f.name), f"{path}.{f.name}" if path else f.name
-        if is_dataclass(value):
-            _check_finite(value, name)
-        elif isinstance(value, float) and not math.isfinite(value):
-            _fail(name, value, "must be a finite number")
-
-
-def _check_choice(path: str, value: Any, choices: tuple) -> None:
-    if value not in choices:
-        _fail(path, value, "allowed values are " + ", ".join(map(str, choices)))
-
-
-def _check_range(
-    path: str,
-    value: float,
-    low: float | None = None,
-    high: float | None = None,
-    *,
-    low_inclusive: bool = True,
-) -> None:
-    below = low is not None and (value < low if low_inclusive else value <= low)
-    above = high is not None and value > high
-    if below or above:
-        lo = "(-inf" if low is None else ("[" if low_inclusive else "(") + f"{low}"
-        hi = "inf)" if high is None else f"{high}]"
-        _fail(path, value, f"must be in {lo}, {hi}")
 
 
 @dataclass
@@ -131,201 +88,12 @@ class TaskConfig:
     cost_limit: float = 10.0
 
     def check(self, path: str) -> None:
-        _check_choice(f"{path}.name", self.name, tuple(task_names()))
-        _check_range(f"{path}.cost_limit", self.cost_limit, 0.0)
+        check_choice(f"{path}.name", self.name, tuple(task_names()))
+        check_range(f"{path}.cost_limit", self.cost_limit, 0.0)
         try:  # an optional package the task needs (the Bullet tasks): fail before building
             require_task_module(get_task(self.name))
         except ImportError as err:
-            _fail(f"{path}.name", self.name, str(err))
-
-
-@dataclass
-class PIDConfig:
-    """PID Lagrangian gains and the OmniSafe/rlpyt options (off by default: FSRL's form)."""
-
-    kp: float = 0.05
-    ki: float = 0.0005
-    kd: float = 0.1
-    ema_alpha: float = 0.0  # 0 disables the EMA of error and cost (FSRL)
-    derivative_delay: int = 1
-    ki_inside_integral: bool = False
-    penalty_max: float | None = None
-    # The derivative's cost history starts at the limit (FSRL: e_prev = 0) or at 0 (OmniSafe).
-    derivative_history_init: str = "limit"
-
-    def check(self, path: str) -> None:
-        _check_choice(
-            f"{path}.derivative_history_init", self.derivative_history_init, ("limit", "zero")
-        )
-        for name in ("kp", "ki", "kd"):
-            _check_range(f"{path}.{name}", getattr(self, name), 0.0)
-        _check_range(f"{path}.ema_alpha", self.ema_alpha, 0.0, 1.0)
-        _check_range(f"{path}.derivative_delay", self.derivative_delay, 1)
-        if self.penalty_max is not None:
-            _check_range(f"{path}.penalty_max", self.penalty_max, 0.0, low_inclusive=False)
-
-
-@dataclass
-class ContrastiveConfig:
-    """The S3RL representation phase (paper §3.4, Table 3)."""
-
-    temperature: float = 0.7
-    batch_size: int = 64  # B: B anchors, B positives, B negatives per InfoNCE step
-    update_interval: int = 1000  # T: gradient steps between phases (enc_update_steps)
-    steps: int = 50  # E: InfoNCE steps per phase (enc_training_epoch)
-    lr: float = 5e-4
-    momentum_tau: float | None = None  # MoCo-style target encoder when set
-    # The safety label the phase contrasts: "binary" (the paper's, SafetyInfoNCELoss),
-    # "cost_to_go" or "margin" (graded: GradedInfoNCELoss, triplets drawn by label bin).
-    label: str = "binary"
-    label_gamma: float = 0.9  # cost_to_go's gamma_c (horizon ~ 1 / (1 - gamma_c) steps)
-    # Inner edges of the graded label's bins (the sampler's strata); None: the label's default
-    # (builders.DEFAULT_LABEL_BINS), in the label's units.
-    label_bins: list[float] | None = None
-    positives: str = "paired"  # graded loss: "paired" (Algorithm 4's pairs) or "all" (RnC)
-
-    @property
-    def graded(self) -> bool:
-        return self.label != "binary"
-
-    def check(self, path: str) -> None:
-        _check_range(f"{path}.temperature", self.temperature, 0.0, low_inclusive=False)
-        _check_range(f"{path}.batch_size", self.batch_size, 1)
-        _check_range(f"{path}.update_interval", self.update_interval, 1)
-        _check_range(f"{path}.steps", self.steps, 1)
-        _check_range(f"{path}.lr", self.lr, 0.0, low_inclusive=False)
-        if self.momentum_tau is not None:
-            _check_range(f"{path}.momentum_tau", self.momentum_tau, 0.0, 1.0, low_inclusive=False)
-        _check_choice(f"{path}.label", self.label, CONTRASTIVE_LABELS)
-        _check_choice(f"{path}.positives", self.positives, GRADED_POSITIVES)
-        if not 0.0 <= self.label_gamma < 1.0:
-            _fail(f"{path}.label_gamma", self.label_gamma, "must be in [0.0, 1.0)")
-        if self.label_bins is not None:
-            edges = list(self.label_bins)
-            increasing = all(a < b for a, b in zip(edges, edges[1:]))
-            if not edges or not increasing or len(edges) > 126:
-                _fail(
-                    f"{path}.label_bins",
-                    edges,
-                    "must be null or 1 to 126 strictly increasing bin edges",
-                )
-
-
-@dataclass
-class AlgoConfig:
-    """SAC, DDPG or PPO with an optional Lagrangian and an optional contrastive phase.
-
-    Defaults: the paper's (SAC family); configs/algo/ddpg*.yaml set FSRL's DDPG-Lag values and
-    configs/algo/*ppo*.yaml FSRL's PPO-Lag values (fsrl/config/ppol_cfg.py).
-    """
-
-    name: str = "s3rl"
-    lagrangian: str = "pid"
-    contrastive: bool = True
-    pid: PIDConfig = field(default_factory=PIDConfig)
-    lagrangian_lr: float = 5e-3  # learned Lagrangian only: Adam's rate per update
-    lagrangian_init: float = 0.0
-    # When lambda updates (objectives.LagrangianUpdater, docs/objectives.md): "collect" (FSRL,
-    # the paper: once per collect, from its finished episodes) or "step" (OmniSafe: after every
-    # gradient step, from the last lagrangian_window finished episodes). Gains and rates are
-    # per update, so each cadence needs its own (configs/pid/, configs/experiment/).
-    lagrangian_cadence: str = "collect"
-    lagrangian_window: int = 10  # episodes (cadence=step; OmniSafe's window_lens)
-    lagrangian_warmup_frames: int = 0  # lambda stays at lagrangian_init until past these frames
-    # Upper bound of the learned multiplier (OmniSafe's lagrangian_upper_bound); None: none.
-    # The PID controller has its own (pid.penalty_max).
-    lagrangian_max: float | None = None
-    rescaling: bool = True
-    cost_entropy: bool = True  # subtract alpha*log_pi in the cost targets (FSRL, paper)
-    # SAC family, the cost critics under the Lagrangian (objectives/sac_lag.py, docs/objectives.md
-    # "Sound critics"); the defaults are FSRL's (experiment=paper), configs/critic/ names sets.
-    # How the pair is read in the cost targets and the actor loss: min (FSRL), max or mean.
-    cost_critic_read: str = "min"
-    cost_nonnegative: bool = False  # clamp the cost value at 0 in its target and actor read
-    # The cost critics' own discount (and the n-step cost sums'); None: gamma (FSRL).
-    cost_gamma: float | None = None
-    # With rescaling: divide the entropy term by 1 + lambda too (FSRL); false keeps alpha's
-    # term out of the rescaling, so auto alpha does not grow with lambda.
-    entropy_rescaling: bool = True
-    gamma: float = 0.99
-    tau: float = 0.05
-    n_step: int = 2
-    actor_lr: float = 5e-4
-    critic_lr: float = 1e-3
-    alpha_lr: float = 3e-4
-    alpha_init: float = 0.005
-    auto_alpha: bool = True
-    batch_size: int = 256
-    update_per_step: float = 0.2
-    # "joint": one forward, one backward of the summed losses (the paper's Algorithm 3; faster).
-    # "fsrl": critics step first, then the actor loss on the updated critics, then alpha.
-    update_order: str = "joint"
-    # DDPG family: std of the Gaussian exploration noise in [-1, 1] action units (FSRL 0.1).
-    exploration_noise: float = 0.1
-    # Off-policy: the replay buffer. PPO family: the FIFO of recent labelled states that the
-    # contrastive phase and the linear probe sample (docs/representation.md).
-    buffer_size: int = 100_000
-    # PPO family (FSRL's PPO-Lag, fsrl/config/ppol_cfg.py); batch_size is the minibatch size.
-    ppo_epochs: int = 4  # passes over each collected batch (FSRL repeat_per_collect)
-    gae_lambda: float = 0.95
-    clip_epsilon: float = 0.2  # FSRL eps_clip
-    critic_coeff: float = 0.25  # FSRL vf_coef, both critics
-    max_grad_norm: float | None = 0.5  # clip of the gradient norm of all parameters
-    # PPO-Lag's cost term: "unclipped" (FSRL) or "clipped" (OmniSafe), objectives/ppo_lag.py
-    cost_surrogate: str = "unclipped"
-    contrastive_cfg: ContrastiveConfig = field(default_factory=ContrastiveConfig)
-
-    @property
-    def family(self) -> str:
-        """``"sac"``, ``"ddpg"`` or ``"ppo"`` (:data:`ALGO_FAMILIES`)."""
-        return ALGO_FAMILIES.get(self.name, "")
-
-    def schedule(self, collector: CollectorConfig) -> UpdateSchedule:
-        """The family's update schedule for these collector settings (``builders.FAMILIES``)."""
-        return FAMILIES[self.family].schedule(collector, self)
-
-    def check(self, path: str) -> None:
-        _check_choice(f"{path}.name", self.name, ALGO_NAMES)
-        if self.family == "ddpg" and self.update_order != "fsrl":
-            # DDPG(-Lag) steps in FSRL's order only (ddpg_lag_update): critics, then the actor.
-            _fail(f"{path}.update_order", self.update_order, "DDPG algorithms need fsrl")
-        _check_choice(f"{path}.lagrangian", self.lagrangian, LAGRANGIAN_CHOICES)
-        _check_choice(f"{path}.update_order", self.update_order, UPDATE_ORDERS)
-        self.pid.check(f"{path}.pid")
-        self.contrastive_cfg.check(f"{path}.contrastive_cfg")
-        _check_range(f"{path}.lagrangian_lr", self.lagrangian_lr, 0.0, low_inclusive=False)
-        _check_range(f"{path}.lagrangian_init", self.lagrangian_init, 0.0)
-        _check_choice(f"{path}.lagrangian_cadence", self.lagrangian_cadence, LAGRANGIAN_CADENCES)
-        _check_range(f"{path}.lagrangian_window", self.lagrangian_window, 1)
-        _check_range(f"{path}.lagrangian_warmup_frames", self.lagrangian_warmup_frames, 0)
-        if self.lagrangian_max is not None:
-            _check_range(f"{path}.lagrangian_max", self.lagrangian_max, 0.0, low_inclusive=False)
-            if self.lagrangian != "learned":
-                _fail(
-                    f"{path}.lagrangian_max",
-                    self.lagrangian_max,
-                    f"bounds the learned multiplier only (algo.lagrangian={self.lagrangian!r}); "
-                    "the PID's bound is algo.pid.penalty_max",
-                )
-        _check_choice(f"{path}.cost_critic_read", self.cost_critic_read, COST_CRITIC_READS)
-        if self.cost_gamma is not None:
-            _check_range(f"{path}.cost_gamma", self.cost_gamma, 0.0, 1.0)
-        _check_range(f"{path}.gamma", self.gamma, 0.0, 1.0)
-        _check_range(f"{path}.tau", self.tau, 0.0, 1.0, low_inclusive=False)
-        _check_range(f"{path}.n_step", self.n_step, 1)
-        for name in ("actor_lr", "critic_lr", "alpha_lr", "alpha_init"):
-            _check_range(f"{path}.{name}", getattr(self, name), 0.0, low_inclusive=False)
-        _check_range(f"{path}.batch_size", self.batch_size, 1)
-        _check_range(f"{path}.update_per_step", self.update_per_step, 0.0, low_inclusive=False)
-        _check_range(f"{path}.exploration_noise", self.exploration_noise, 0.0)
-        _check_range(f"{path}.buffer_size", self.buffer_size, self.batch_size)
-        _check_range(f"{path}.ppo_epochs", self.ppo_epochs, 1)
-        _check_range(f"{path}.gae_lambda", self.gae_lambda, 0.0, 1.0)
-        _check_range(f"{path}.clip_epsilon", self.clip_epsilon, 0.0, low_inclusive=False)
-        _check_range(f"{path}.critic_coeff", self.critic_coeff, 0.0, low_inclusive=False)
-        if self.max_grad_norm is not None:
-            _check_range(f"{path}.max_grad_norm", self.max_grad_norm, 0.0, low_inclusive=False)
-        _check_choice(f"{path}.cost_surrogate", self.cost_surrogate, COST_SURROGATES)
+            fail(f"{path}.name", self.name, str(err))
 
 
 @dataclass
@@ -342,10 +110,10 @@ class NetworkConfig:
         for name in ("actor_hidden", "critic_hidden"):
             sizes = getattr(self, name)
             if len(sizes) == 0 or any(int(s) < 1 for s in sizes):
-                _fail(f"{path}.{name}", list(sizes), "must be a non-empty list of sizes >= 1")
-        _check_choice(f"{path}.activation", self.activation, ACTIVATIONS)
+                fail(f"{path}.{name}", list(sizes), "must be a non-empty list of sizes >= 1")
+        check_choice(f"{path}.activation", self.activation, tuple(ACTIVATIONS))
         if not self.log_std_min < self.log_std_max:
-            _fail(f"{path}.log_std_min", self.log_std_min, "must be below log_std_max")
+            fail(f"{path}.log_std_min", self.log_std_min, "must be below log_std_max")
 
 
 @dataclass
@@ -360,12 +128,12 @@ class CollectorConfig:
     frames_per_epoch: int = 10_000  # evaluation and checkpoint cadence
 
     def check(self, path: str) -> None:
-        _check_range(f"{path}.num_envs", self.num_envs, 1)
-        _check_choice(f"{path}.batching", self.batching, BATCHING_CHOICES)
-        _check_range(f"{path}.frames_per_batch", self.frames_per_batch, self.num_envs)
-        _check_range(f"{path}.total_frames", self.total_frames, 1)
-        _check_range(f"{path}.init_random_frames", self.init_random_frames, 0)
-        _check_range(f"{path}.frames_per_epoch", self.frames_per_epoch, 1)
+        check_range(f"{path}.num_envs", self.num_envs, 1)
+        check_choice(f"{path}.batching", self.batching, BATCHING_CHOICES)
+        check_range(f"{path}.frames_per_batch", self.frames_per_batch, self.num_envs)
+        check_range(f"{path}.total_frames", self.total_frames, 1)
+        check_range(f"{path}.init_random_frames", self.init_random_frames, 0)
+        check_range(f"{path}.frames_per_epoch", self.frames_per_epoch, 1)
 
 
 @dataclass
@@ -381,11 +149,11 @@ class EvalConfig:
     random_baseline: bool = True  # add a random-policy row to the final table
 
     def check(self, path: str) -> None:
-        _check_range(f"{path}.num_envs", self.num_envs, 1)
-        _check_range(f"{path}.episodes", self.episodes, 1)
-        _check_range(f"{path}.final_episodes", self.final_episodes, 1)
+        check_range(f"{path}.num_envs", self.num_envs, 1)
+        check_range(f"{path}.episodes", self.episodes, 1)
+        check_range(f"{path}.final_episodes", self.final_episodes, 1)
         if self.max_steps is not None:
-            _check_range(f"{path}.max_steps", self.max_steps, 1)
+            check_range(f"{path}.max_steps", self.max_steps, 1)
 
 
 @dataclass
@@ -398,11 +166,11 @@ class LoggerConfig:
     progress_bar: bool = True
 
     def check(self, path: str) -> None:
-        _check_choice(f"{path}.backend", self.backend, LOGGER_BACKENDS)
-        _check_choice(f"{path}.wandb_mode", self.wandb_mode, ("offline", "online", "disabled"))
+        check_choice(f"{path}.backend", self.backend, LOGGER_BACKENDS)
+        check_choice(f"{path}.wandb_mode", self.wandb_mode, ("offline", "online", "disabled"))
         module, extra = LOGGER_PACKAGES.get(self.backend, (None, None))
         if module is not None and importlib.util.find_spec(module) is None:
-            _fail(
+            fail(
                 f"{path}.backend",
                 self.backend,
                 f"needs the '{module}' package: pip install -e \".[{extra}]\" "
@@ -410,22 +178,38 @@ class LoggerConfig:
             )
 
 
+@dataclass
+class DiagnosticsConfig:
+    """Measurements added to each epoch's row (trainer hooks, ``s3rl_torchrl/hooks/``). They
+    change nothing that is trained."""
+
+    # The linear probes of the policy encoder: probe/accuracy, probe/auc (safe vs unsafe) and
+    # probe/spearman, probe/r2 (a graded label); docs/results.md. experiment=paper turns them on.
+    probes: bool = False
+    # The SAC family's critics against recent returns and the actor's gradient per loss term:
+    # critic/*, grad/* (docs/objectives.md, "Critic diagnostics"). No effect on other families.
+    critics: bool = True
+
+
 def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> None:
     """Refuse a run that would evaluate an untrained policy as if it were trained."""
-    schedule = algo.schedule(collector)
+    family = family_of(algo)
+    schedule = family.schedule(collector, algo)
     if schedule.planned_gradient_steps(stop_at=1) > 0:
         return
     batch = collector_batch_frames(collector)
 
     def learns(**changes: int) -> bool:
         changed = CollectorConfig(**{**vars(collector), **changes})
-        return algo.schedule(changed).planned_gradient_steps(stop_at=1) > 0
+        return family.schedule(changed, algo).planned_gradient_steps(stop_at=1) > 0
 
     options = []
     # The fewest whole batches that learn with the other values unchanged. Bounded: once past
     # init_random_frames and batch_size stored transitions (n-step holds back n_step frames
-    # per env), every batch owes update_per_step * batch steps.
-    start = max(collector.init_random_frames, algo.batch_size + algo.n_step * collector.num_envs)
+    # per env), every batch owes update_per_step * batch steps. (Only an off-policy schedule
+    # can fail to learn: every on-policy batch owes ppo_epochs passes.)
+    held_back = getattr(algo, "n_step", 1) * collector.num_envs
+    start = max(collector.init_random_frames, algo.batch_size + held_back)
     limit = start + batch * (1 + math.ceil(1.0 / (algo.update_per_step * batch)))
     total = next(
         (n for n in range(batch, limit + batch, batch) if learns(total_frames=n)), None
@@ -437,7 +221,7 @@ def _check_learns(collector: CollectorConfig, algo: AlgoConfig, prefix: str) -> 
         options.append(
             f"lower {prefix}collector.init_random_frames to {last_batch_end} or less"
         )
-    _fail(
+    fail(
         prefix + "collector.total_frames",
         collector.total_frames,
         schedule.no_learning_reason(prefix)
@@ -451,11 +235,14 @@ class TrainConfig:
     """A whole training run (``s3rl-train``)."""
 
     task: TaskConfig = field(default_factory=TaskConfig)
-    algo: AlgoConfig = field(default_factory=AlgoConfig)
+    # The algorithm's family's config (algorithms/): S3RL's by default. Hydra's schema holds the
+    # base class, which the algorithm's YAML turns into its family's.
+    algo: AlgoConfig = field(default_factory=lambda: ALGORITHMS["s3rl"].config("s3rl"))
     network: NetworkConfig = field(default_factory=NetworkConfig)
     collector: CollectorConfig = field(default_factory=CollectorConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     logger: LoggerConfig = field(default_factory=LoggerConfig)
+    diagnostics: DiagnosticsConfig = field(default_factory=DiagnosticsConfig)
     seed: int = 10
     # Several seeds in one process (trainer/multiseed.py): K independent agents, one batched
     # gradient step; `seed` is then unused (each seed's sub-run records its own).
@@ -471,18 +258,27 @@ class TrainConfig:
 
     def check(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
-        _check_finite(self, path)
+        check_finite(self, path)
+        check_choice(prefix + "algo.name", self.algo.name, ALGO_NAMES)
+        family = family_of(self.algo)
+        if type(self.algo) is not family.config:
+            fail(
+                prefix + "algo.name",
+                self.algo.name,
+                f"is a {family.name.upper()} algorithm, its config a {family.config.__name__} "
+                f"(got a {type(self.algo).__name__}); choose it with algo={self.algo.name}",
+            )
         for name in ("task", "algo", "network", "collector", "eval", "logger"):
             getattr(self, name).check(prefix + name)
-        _check_choice(prefix + "device", self.device, DEVICES)
-        _check_range(prefix + "threads", self.threads, 0)
-        _check_range(prefix + "save_interval", self.save_interval, 1)
+        check_choice(prefix + "device", self.device, DEVICES)
+        check_range(prefix + "threads", self.threads, 0)
+        check_range(prefix + "save_interval", self.save_interval, 1)
         if self.compile and self.device == "cpu":
             _check_cpp_compiler(prefix + "compile")
         if self.seeds is not None:
             self._check_seeds(prefix + "seeds")
         if self.collector.frames_per_epoch % self.collector.frames_per_batch:
-            _fail(
+            fail(
                 prefix + "collector.frames_per_epoch",
                 self.collector.frames_per_epoch,
                 f"must be a multiple of collector.frames_per_batch "
@@ -497,10 +293,10 @@ class TrainConfig:
         if label == "binary":
             return
         if not self.algo.contrastive:
-            _fail(path, label, "a graded label needs the contrastive phase (algo.contrastive=true)")
+            fail(path, label, "a graded label needs the contrastive phase (algo.contrastive=true)")
         if label == "margin" and get_task(self.task.name).margin_rule is None:
             having = sorted({t.family for t in map(get_task, task_names()) if t.margin_rule})
-            _fail(
+            fail(
                 path,
                 label,
                 f"task {self.task.name} exposes no margin (the {' and '.join(having)} tasks do); "
@@ -510,21 +306,21 @@ class TrainConfig:
     def _check_seeds(self, path: str) -> None:
         seeds = list(self.seeds)
         if not seeds:
-            _fail(path, seeds, "must hold at least one seed (or be null: one run with `seed`)")
+            fail(path, seeds, "must hold at least one seed (or be null: one run with `seed`)")
         if any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
-            _fail(path, seeds, "must be integers")
+            fail(path, seeds, "must be integers")
         if len(set(seeds)) != len(seeds):
-            _fail(path, seeds, "must be distinct (a repeated seed would train the same run twice)")
-        if self.algo.family != "sac":
-            _fail(
+            fail(path, seeds, "must be distinct (a repeated seed would train the same run twice)")
+        if not family_of(self.algo).seeds_in_one_process:
+            able = [name for name, a in ALGORITHMS.items() if a.family.seeds_in_one_process]
+            fail(
                 path,
                 seeds,
-                f"multi-seed training supports the SAC family only "
-                f"({', '.join(n for n, f in ALGO_FAMILIES.items() if f == 'sac')}); "
+                f"multi-seed training supports the SAC family only ({', '.join(able)}); "
                 f"got algo.name={self.algo.name!r}: train its seeds as separate runs",
             )
         if self.algo.update_order != "joint":
-            _fail(
+            fail(
                 path,
                 seeds,
                 f"needs algo.update_order=joint (multi-seed training batches the joint update; "
@@ -545,10 +341,10 @@ class EvalRunConfig:
     video_path: str | None = None
 
     def check(self, path: str = "") -> None:
-        _check_range("episodes", self.episodes, 1)
-        _check_range("num_envs", self.num_envs, 1)
+        check_range("episodes", self.episodes, 1)
+        check_range("num_envs", self.num_envs, 1)
         if self.max_steps is not None:
-            _check_range("max_steps", self.max_steps, 1)
+            check_range("max_steps", self.max_steps, 1)
 
 
 def run_dir_name(seed: int, seeds: list[int] | None) -> str:
@@ -568,32 +364,33 @@ def hydra_run_dir(resume: str | None, algo: str, task: str, seeds: str, now: str
 def episode_frames(task_name: str, episodes: int) -> int:
     """Frames in ``episodes`` whole episodes of a task: FSRL's ``episode_per_collect`` as a
     torchrl batch size (``${s3rl_episode_frames:${task.name},20}`` in ``experiment=paper``)."""
-    _check_choice("task.name", task_name, tuple(task_names()))
+    check_choice("task.name", task_name, tuple(task_names()))
     return int(episodes) * get_task(task_name).max_episode_steps
 
 
 def lagrangian_for(algo_name: str, controller: str) -> str:
     """``controller`` for an algorithm with a Lagrange multiplier, ``none`` for the others
-    (``${s3rl_lagrangian:${algo.name},learned}`` in ``experiment=safe``)."""
-    _check_choice("algo.name", algo_name, ALGO_NAMES)
-    return "none" if algo_name in UNCONSTRAINED_ALGOS else controller
+    (``${s3rl_lagrangian:${algo.name},learned}`` in ``experiment=safe`` and ``quick``). An
+    unknown name is left to :func:`validate`, whose error lists the valid ones."""
+    entry = ALGORITHMS.get(algo_name)
+    return "none" if entry is not None and entry.lagrangian == "none" else controller
 
 
 def safe_cost_limit(task_name: str) -> float:
     """The limit ``experiment=safe`` trains a task at (``TaskSpec.safe_cost_limit``: the peers'
     benchmark limit where the registry has one, e.g. 25 for SafetyPointGoal1, else the paper's
     10); ``${s3rl_safe_cost_limit:${task.name}}``. A ``task.cost_limit=`` override still wins."""
-    _check_choice("task.name", task_name, tuple(task_names()))
+    check_choice("task.name", task_name, tuple(task_names()))
     return float(get_task(task_name).safe_cost_limit)
 
 
 def safe_setting(task_name: str, name: str, default: Any) -> Any:
     """A task's own value of one setting of ``experiment=safe`` (``TaskSpec.safe``), else
     ``default``: ``${s3rl_safe_setting:${task.name},lagrangian_lr,3e-4}``."""
-    _check_choice("task.name", task_name, tuple(task_names()))
+    check_choice("task.name", task_name, tuple(task_names()))
     settings = get_task(task_name).safe
     if not hasattr(settings, name):
-        _fail("s3rl_safe_setting", name, f"TaskSpec.safe has no setting {name!r}")
+        fail("s3rl_safe_setting", name, f"TaskSpec.safe has no setting {name!r}")
     value = getattr(settings, name)
     return default if value is None else value
 
@@ -619,18 +416,62 @@ def register_configs() -> None:
     OmegaConf.register_new_resolver("s3rl_safe_cost_limit", safe_cost_limit, replace=True)
     OmegaConf.register_new_resolver("s3rl_safe_setting", safe_setting, replace=True)
     cs = ConfigStore.instance()
-    cs.store(name="train_schema", node=TrainConfig)
+    # `algo` as the base class: each configs/algo/<name>.yaml turns it into its family's config
+    # with its registry entry's values (`- /algo_defaults@_here_: <name>`).
+    cs.store(name="train_schema", node=TrainConfig(algo=AlgoConfig()))
     cs.store(name="eval_schema", node=EvalRunConfig)
+    for name, algorithm in ALGORITHMS.items():
+        cs.store(group="algo_defaults", name=name, node=algorithm.config(name))
     for name in task_names():
         cs.store(
             group="task", name=name, node=TaskConfig(name=name, cost_limit=get_task(name).cost_limit)
         )
 
 
+def _train_schema(algo: Any) -> DictConfig:
+    """The typed node of a ``TrainConfig`` whose ``algo`` is ``algo``'s: a family's config
+    already (a Hydra config), else the family its ``name`` registers."""
+    if isinstance(algo, DictConfig) and issubclass(OmegaConf.get_type(algo), AlgoConfig):
+        return OmegaConf.structured(TrainConfig(algo=AlgoConfig()))
+    name = (algo or {}).get("name") if isinstance(algo, dict | DictConfig) else None
+    family = family_of(name if isinstance(name, str) else "")
+    return OmegaConf.structured(TrainConfig(algo=family.config(name=name)))
+
+
+def saved_config_node(saved: dict) -> DictConfig:
+    """The typed ``TrainConfig`` node of a saved config (a run's ``config.json``, a
+    checkpoint's), written by this version or an earlier one:
+
+    - ``algo`` becomes its family's config and the fields that family does not have are
+      dropped: up to commit 8e0ee0c one class held every family's fields, so a PPO run saved
+      ``n_step``, ``tau`` and ``alpha_*``, a SAC run ``ppo_epochs`` and ``exploration_noise``,
+      a DDPG run ``update_order`` (always ``fsrl``) and the SAC critics' switches, none of
+      which its family read;
+    - a config without ``diagnostics`` (before the trainer hooks) ran the linear probes at
+      every epoch, so they stay on: the resumed run logs the columns it logged.
+    """
+    saved = dict(saved)
+    algo = dict(saved.get("algo") or {})
+    family = family_of(algo.get("name", ""))
+    kept = {f.name for f in fields(family.config)}
+    saved["algo"] = {key: value for key, value in algo.items() if key in kept}
+    saved.setdefault("diagnostics", {"probes": True})
+    return OmegaConf.merge(_train_schema(saved["algo"]), saved)
+
+
+def saved_train_config(saved: dict) -> TrainConfig:
+    """A saved config as this version's :class:`TrainConfig` (:func:`saved_config_node`),
+    not validated: the values the run ran with."""
+    return OmegaConf.to_object(saved_config_node(saved))
+
+
 def validate(cfg: DictConfig | TrainConfig, schema: type = TrainConfig) -> Any:
     """Turn a Hydra config into its dataclass and check every value; raise ``ConfigError``."""
     if isinstance(cfg, DictConfig):
-        merged = OmegaConf.merge(OmegaConf.structured(schema), cfg)
+        if schema is TrainConfig:
+            merged = OmegaConf.merge(_train_schema(cfg.get("algo")), cfg)
+        else:
+            merged = OmegaConf.merge(OmegaConf.structured(schema), cfg)
         obj = OmegaConf.to_object(merged)
     else:
         obj = cfg

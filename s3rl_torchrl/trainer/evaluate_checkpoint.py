@@ -9,12 +9,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
 from s3rl_torchrl.envs import get_task, make_env
 from s3rl_torchrl.trainer.builders import build_agent, build_replay_buffer
 from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint
-from s3rl_torchrl.trainer.config import TrainConfig
+from s3rl_torchrl.trainer.config import TrainConfig, saved_train_config
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, record_video
 
 # builders.build_envs seeds a run's test envs at its seed + this offset (apart from the
@@ -87,9 +85,7 @@ def load_policy(checkpoint: str | Path):
     """The trained actor of a checkpoint and the run's config (a :class:`TrainConfig`)."""
     state, _ = load_checkpoint(checkpoint)
     try:
-        cfg: TrainConfig = OmegaConf.to_object(
-            OmegaConf.merge(OmegaConf.structured(TrainConfig), state["config"])
-        )
+        cfg = saved_train_config(state["config"])
     except Exception as err:
         raise CheckpointError(f"The checkpoint's config does not load: {err}") from err
     env = make_env(cfg.task.name, seed=0)

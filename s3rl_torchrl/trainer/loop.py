@@ -4,7 +4,7 @@ store, update lambda, update, evaluate.
 Read top to bottom: :func:`train` builds everything from a :class:`TrainConfig`, then runs one
 iteration per collected batch:
 
-1. store the batch as the algorithm's update schedule says (trainer/schedule.py; off-policy:
+1. store the batch as the algorithm's update schedule says (algorithms/schedule.py; off-policy:
    n-step transitions into the replay buffer; on-policy: the advantages (GAE) of the batch,
    which replaces the previous one, and its labelled states into a FIFO for the contrastive
    phase);
@@ -18,6 +18,11 @@ iteration per collected batch:
    cadence ``step`` by one lambda update from the window, and every ``T`` gradient steps the
    contrastive phase on the policy encoder;
 4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
+
+What a run measures or stores besides training comes from hooks (``s3rl_torchrl/hooks/``),
+which the config switches on and which the loop calls at four points: after each collect,
+after each gradient step, after each evaluation (columns of the epoch's row) and at each
+epoch's end (:meth:`Trainer.register_op`, as torchrl's trainer offers).
 
 Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
 run can go on with ``resume=<run dir>``: pending gradient steps and the epoch's end are done
@@ -41,24 +46,20 @@ import torch
 from tensordict import TensorDict, TensorDictBase
 from tqdm.auto import tqdm
 
-from s3rl_torchrl.diagnostics.critics import (
-    RecentEpisodes,
-    actor_gradient_norms,
-    critic_calibration,
-)
-from s3rl_torchrl.diagnostics.probe import replay_graded_probe, replay_probe
+from s3rl_torchrl.algorithms import Agent
 from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, restore_env
-from s3rl_torchrl.modules import get_policy_encoder
+from s3rl_torchrl.hooks import (
+    HOOK_POINTS,
+    CriticDiagnostics,
+    GradedLabels,
+    LinearProbes,
+    TrainerHook,
+)
 from s3rl_torchrl.trainer.builders import (
-    SAFE_LABEL_KEY,
-    Agent,
     build_agent,
     build_envs,
-    build_labeller,
     build_replay_buffer,
     build_updates,
-    probe_label_bins,
-    probe_label_key,
     set_torch_threads,
 )
 from s3rl_torchrl.trainer.checkpoint import (
@@ -72,7 +73,7 @@ from s3rl_torchrl.trainer.checkpoint import (
     save_checkpoint,
 )
 from s3rl_torchrl.trainer.collector import ResumableCollector
-from s3rl_torchrl.trainer.config import TrainConfig, to_container
+from s3rl_torchrl.trainer.config import TrainConfig, saved_train_config, to_container
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.evaluation import (
     BestFeasible,
@@ -95,8 +96,6 @@ CONTRASTIVE_DIAGNOSTICS = (
 )
 CONFIG_FILE = "config.json"
 BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
-# Finished training episodes the critic calibration reads each epoch (diagnostics/critics.py).
-CALIBRATION_EPISODES = 10
 
 
 @dataclass
@@ -159,12 +158,22 @@ def compile_loss(fn: Callable) -> Callable:
     stay). What it no longer sees is a Python attribute of a loss or network reassigned after
     the first call (e.g. ``loss.fixed_alpha = ...``, a module swapped in): rebuild the loss, or
     call ``torch._dynamo.reset()``, after such a change.
+
+    No guard on the length of tensordict's memo of type checks (``_TENSORCLASS_MEMO``) either:
+    it grows whenever tensordict checks a type for the first time, e.g. ``tuple`` in the first
+    eager ``vmap`` (the critic diagnostics' at the first epoch's end). The loss then recompiled,
+    and every later step checked both entries' guards: 6.0 instead of 4.7 ms per step of the
+    paper's recipe. No result depends on that length.
     """
     return torch.compile(
-        fn,
-        isolate_recompiles=True,
-        options={"guard_filter_fn": torch.compiler.skip_guard_on_all_nn_modules_unsafe},
+        fn, isolate_recompiles=True, options={"guard_filter_fn": _compiled_loss_guards}
     )
+
+
+def _compiled_loss_guards(entries) -> list[bool]:
+    """The guards :func:`compile_loss` keeps (its docstring says which it drops, and why)."""
+    keep = torch.compiler.skip_guard_on_all_nn_modules_unsafe(entries)
+    return [kept and "_TENSORCLASS_MEMO" not in entry.name for kept, entry in zip(keep, entries)]
 
 
 def _tensordict(saved: dict[str, Any]) -> TensorDict:
@@ -179,21 +188,28 @@ def seed_everything(seed: int) -> None:
 
 
 class Trainer:
-    """Holds a run's components; :meth:`run` is the loop. Build it with :func:`train`."""
+    """Holds a run's components; :meth:`run` is the loop. Build it with :func:`train`.
+
+    ``hooks`` (name -> :class:`~s3rl_torchrl.hooks.TrainerHook`) are registered after the
+    hooks the config switches on, before a resumed run restores their state;
+    ``on_epoch_end(trainer, row)`` is an ``"epoch_end"`` op registered last.
+    """
 
     def __init__(
         self,
         cfg: TrainConfig,
         run_dir: str | Path,
         on_epoch_end: Callable[[Trainer, dict[str, Any]], None] | None = None,
+        hooks: dict[str, TrainerHook] | None = None,
     ) -> None:
         self.cfg = cfg
-        self.on_epoch_end = on_epoch_end
         self.stop = StopRequest()
-        checkpoint = None
+        checkpoint = saved = None
         if cfg.resume:
             checkpoint, checkpoint_dir = load_checkpoint(cfg.resume)
-            check_compatible(checkpoint["config"], to_container(cfg), RESUME_LOCKED)
+            # The run's config as this version reads it (trainer/config.py: saved_config_node).
+            saved = to_container(saved_train_config(checkpoint["config"]))
+            check_compatible(saved, to_container(cfg), RESUME_LOCKED)
             check_total_frames(cfg, checkpoint["counters"]["frames"])
             run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
         self.run_dir = Path(run_dir)
@@ -207,29 +223,39 @@ class Trainer:
 
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
-        self.train_env, self.test_env = build_envs(cfg)
+        # A graded safety label stored with every step, when the contrastive phase contrasts
+        # one or the probes measure one (hooks/labels.py); the margin is read by the env.
+        labels = GradedLabels.for_run(cfg.algo, cfg.diagnostics.probes)
+        self.train_env, self.test_env = build_envs(cfg, labels)
         # Off-policy: the replay buffer; on-policy: the FIFO of recent labelled states that the
-        # contrastive phase and the probe sample (builders.build_replay_buffer).
+        # contrastive phase and the probes sample (builders.build_replay_buffer).
         self.replay_buffer = build_replay_buffer(cfg.algo)
-        # The cost-to-go label (contrasted, or probed) needs each collected batch's time
-        # dimension: it is written before the batch is stored (builders.build_labeller).
-        self.labeller = build_labeller(cfg.algo)
         # torch.compile of the SAC family's loss (its forward and, through AOTAutograd, its
         # backward); the optimiser and target steps stay eager (fused Adam, one foreach lerp).
         # The first steps pay the compile time (docs/benchmarks.md says when it pays off).
         self.agent: Agent = build_agent(
             cfg, self.train_env, self.replay_buffer, compile_loss if cfg.compile else None
         )
-        # What the algorithm's update schedule stores and samples (trainer/schedule.py).
-        self.updates = build_updates(cfg, self.agent, self.replay_buffer)
+        # What the algorithm's update schedule stores and samples (algorithms/schedule.py).
+        self.updates = build_updates(cfg, self.agent, self.replay_buffer, labels)
         self.schedule = self.updates.schedule
-        # The SAC family's critics are held against the returns of the last finished training
-        # episodes at every epoch's end (diagnostics/critics.py).
-        self.recent_episodes = (
-            RecentEpisodes(CALIBRATION_EPISODES)
-            if hasattr(self.agent.loss, "actor_loss_terms")
-            else None
-        )
+        # The hooks the config asks for (hooks/); each registers its ops and its state.
+        self._ops: dict[str, list[Callable]] = {point: [] for point in HOOK_POINTS}
+        self._hooks: dict[str, TrainerHook] = {}
+        if labels is not None:
+            labels.register(self, "labels")
+        if cfg.diagnostics.probes:
+            LinearProbes(self.replay_buffer, self.agent.actor, labels, cfg.seed).register(
+                self, "probes"
+            )
+        if cfg.diagnostics.critics and CriticDiagnostics.supports(self.agent.loss):
+            CriticDiagnostics(
+                self.agent.loss, self.replay_buffer, cfg.algo.gamma, cfg.seed
+            ).register(self, "critic_diagnostics")
+        for name, hook in (hooks or {}).items():
+            hook.register(self, name)
+        if on_epoch_end is not None:
+            self.register_op("epoch_end", on_epoch_end)
         self.counters = Counters()
         self.best = BestFeasible()
         # The collector and, until it is built on resume, the checkpoint's collector state.
@@ -244,7 +270,7 @@ class Trainer:
             self._restore(checkpoint, checkpoint_dir)
             record_resume(
                 self.run_dir,
-                checkpoint["config"],
+                saved,
                 to_container(cfg),
                 self.counters,
                 inexact=self.inexact_resume,
@@ -262,6 +288,20 @@ class Trainer:
             self.run_dir, logger, resume_frames=self.counters.frames if checkpoint else None
         )
         self.history: list[dict[str, Any]] = []
+
+    # ----------------------------------------------------------------------------- hooks
+    def register_op(self, point: str, op: Callable) -> None:
+        """Call ``op`` at ``point`` (one of ``hooks.HOOK_POINTS``; what it takes and returns:
+        ``hooks/base.py``), after the ops registered before it."""
+        if point not in self._ops:
+            raise ValueError(f"Unknown hook point {point!r}; valid are {', '.join(HOOK_POINTS)}.")
+        self._ops[point].append(op)
+
+    def register_module(self, name: str, module: TrainerHook) -> None:
+        """Keep ``module``'s state in the checkpoint under ``name``."""
+        if name in self._hooks:
+            raise ValueError(f"a hook named {name!r} is registered already")
+        self._hooks[name] = module
 
     # ----------------------------------------------------------------------------- the loop
     def run(self) -> TrainResult:
@@ -353,10 +393,8 @@ class Trainer:
         )
 
     def _store(self, batch: TensorDictBase) -> None:
-        if self.recent_episodes is not None:
-            self.recent_episodes.extend(batch)
-        if self.labeller is not None:
-            batch = self.labeller(batch)
+        for op in self._ops["after_collect"]:  # hooks: a graded label, the recent episodes
+            batch = op(batch)
         self.updates.store(batch)
 
     def _update_lagrangian(self, batch: TensorDictBase) -> None:
@@ -391,15 +429,16 @@ class Trainer:
         return self.updates.owed(self.counters.frames, frames)
 
     def _update(self, batch: TensorDictBase) -> TensorDictBase:
-        """One gradient step of the algorithm (builders.build_agent); the detached losses."""
+        """One gradient step of the algorithm (its family's, algorithms/); the detached losses."""
         return self.agent.update(batch)
 
     def _gradient_step(self) -> None:
         self._after_gradient_step(self._update(self.updates.sample()))
 
     def _after_gradient_step(self, losses: TensorDictBase) -> None:
-        """Counters, last losses and, every ``T`` steps, the contrastive phase (shared with
-        the multi-seed trainer, whose gradient steps are batched over seeds)."""
+        """Counters, last losses, lambda under cadence step, every ``T`` steps the contrastive
+        phase, then the hooks (shared with the multi-seed trainer, whose gradient steps are
+        batched over seeds)."""
         agent = self.agent
         self.counters.grad_steps += 1
         self.counters.pending_updates -= 1.0
@@ -416,6 +455,8 @@ class Trainer:
             else:
                 self.counters.contrastive_phases += 1
                 self._last_contrastive = stats
+        for op in self._ops["after_update"]:
+            op(losses)
 
     def _end_epoch(self) -> None:
         cfg, c = self.cfg, self.counters
@@ -427,14 +468,16 @@ class Trainer:
         ):
             self._save_best()
         row = self._epoch_row(result, time.perf_counter() - start)
+        for op in self._ops["after_evaluation"]:  # hooks: probes, critic diagnostics
+            row.update(op(row))
         self.metrics.log_epoch(row)
         self.history.append(row)
         self._train_episodes.clear()
         last = c.frames >= cfg.collector.total_frames
         if c.epochs % cfg.save_interval == 0 or last:
             self.save()
-        if self.on_epoch_end is not None:
-            self.on_epoch_end(self, row)
+        for op in self._ops["epoch_end"]:
+            op(self, row)
 
     def _epoch_row(self, result: EvalResult, eval_seconds: float) -> dict[str, Any]:
         c = self.counters
@@ -461,49 +504,6 @@ class Trainer:
             row[f"train/{key}"] = float(value.float().mean()) if value is not None else nan
         for key in CONTRASTIVE_DIAGNOSTICS:
             row[f"contrastive/{key}"] = float(self._last_contrastive.get(key, nan))
-        # Does the policy encoder separate safe from unsafe states? A logistic regression on a
-        # class-balanced replay sample, its own seed per epoch (NaN while a class is missing).
-        probe = replay_probe(
-            self.replay_buffer,
-            get_policy_encoder(self.agent.actor),
-            seed=self.cfg.seed * 1_000_003 + c.epochs,
-            label_key=SAFE_LABEL_KEY,
-        )
-        row["probe/accuracy"], row["probe/auc"] = probe.accuracy, probe.auc
-        # Does the embedding order states by a graded label: the one the run is trained on, or
-        # the cost-to-go in binary runs and baselines (builders.probe_label)? Held-out Spearman
-        # and R^2 of a linear regression on a bin-balanced replay sample.
-        graded = replay_graded_probe(
-            self.replay_buffer,
-            get_policy_encoder(self.agent.actor),
-            seed=self.cfg.seed * 1_000_003 + c.epochs,
-            label_key=probe_label_key(self.cfg.algo),
-            bin_edges=probe_label_bins(self.cfg.algo),
-        )
-        row["probe/spearman"], row["probe/r2"] = graded.spearman, graded.r2
-        row.update(self._critic_diagnostics())
-        return row
-
-    def _critic_diagnostics(self) -> dict[str, float]:
-        """The SAC family's critics against the returns of the last finished training episodes,
-        and the actor's gradient norm per loss term on one replay batch of 256 (drawn with its
-        own seed and random stream, so training's streams are untouched)."""
-        if self.recent_episodes is None:
-            return {}
-        loss = self.agent.loss
-        row = critic_calibration(
-            loss,
-            list(self.recent_episodes.episodes),
-            self.cfg.algo.gamma,
-            cost_gamma=self.cfg.algo.cost_gamma,
-        )
-        storage = self.replay_buffer.storage
-        if len(storage) == 0:
-            return {**row, "grad/entropy": math.nan, "grad/reward": math.nan, "grad/cost": math.nan}
-        with torch.random.fork_rng():
-            torch.manual_seed(self.cfg.seed * 1_000_003 + self.counters.epochs)
-            index = torch.randint(len(storage), (256,))
-            row.update(actor_gradient_norms(loss, storage[index]))
         return row
 
     def _progress_postfix(self) -> dict[str, str]:
@@ -587,20 +587,14 @@ class Trainer:
             "config": to_container(self.cfg),
             "counters": dict(vars(self.counters)),
             "loss": agent.loss.state_dict(),
-            "optimizers": {
-                name: opt.state_dict()
-                for name, opt in agent.optimizers._asdict().items()
-                if opt is not None
-            },
+            "optimizers": {name: opt.state_dict() for name, opt in agent.optimizers.items()},
             "lagrangian": agent.lagrangian.state_dict() if agent.lagrangian is not None else None,
             "contrastive": agent.contrastive.state_dict()
             if agent.contrastive is not None
             else None,
             "rng": capture_rng_state(),
             "best_feasible": asdict(self.best),
-            "recent_episodes": self.recent_episodes.state_dict()
-            if self.recent_episodes is not None
-            else None,
+            "hooks": {name: hook.state_dict() for name, hook in self._hooks.items()},
             # What the next batch and the epoch's row depend on besides the networks: the
             # envs' simulators and generators and the collector's carrier (None where a task
             # cannot be restored exactly), and the epoch's training episodes and last losses.
@@ -646,21 +640,22 @@ class Trainer:
     def _restore(self, state: dict[str, Any], checkpoint_dir: Path) -> None:
         agent = self.agent
         agent.loss.load_state_dict(state["loss"])
-        for name, opt in agent.optimizers._asdict().items():
-            if opt is not None:
-                opt.load_state_dict(state["optimizers"][name])
+        for name, opt in agent.optimizers.items():
+            opt.load_state_dict(state["optimizers"][name])
         if agent.lagrangian is not None:
             agent.lagrangian.load_state_dict(state["lagrangian"])
         if agent.contrastive is not None:
             agent.contrastive.load_state_dict(state["contrastive"])
         self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
-        self._label_unlabelled_steps()
         self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         self.best = BestFeasible(**state.get("best_feasible", {}))
-        if self.recent_episodes is not None and state.get("recent_episodes") is not None:
-            self.recent_episodes.load_state_dict(state["recent_episodes"])
         self.updates.load_state_dict(state.get("updates") or {})
+        hooks = state.get("hooks")
+        if hooks is None:  # written before the hooks: the critic diagnostics' episodes had a key
+            hooks = {"critic_diagnostics": state.get("recent_episodes")}
+        for name, hook in self._hooks.items():  # after the buffers: a hook may read them
+            hook.load_state_dict(hooks.get(name) or {})
         progress = state.get("epoch_progress")
         if progress is not None:
             self._train_episodes = [tuple(e) for e in progress["train_episodes"]]
@@ -682,18 +677,6 @@ class Trainer:
                 "here, so the rest of the run differs from an uninterrupted one."
             )
         restore_rng_state(state["rng"])
-
-    def _label_unlabelled_steps(self) -> None:
-        """A checkpoint written before every run stored its probed label (binary runs and
-        baselines had no cost-to-go): its stored steps get a NaN label, which the graded probe
-        leaves out, so the run resumes and new steps carry the label. Nothing else in the
-        buffer changes."""
-        storage = self.replay_buffer.storage
-        key = probe_label_key(self.cfg.algo)
-        if not storage.initialized or key in storage._storage.keys(include_nested=True):
-            return
-        like = storage._storage.get(SAFE_LABEL_KEY)
-        storage._storage.set(key, torch.full(like.shape, math.nan, dtype=torch.float32))
 
 
 def check_total_frames(cfg: TrainConfig, frames: int) -> None:
@@ -746,6 +729,8 @@ def train(
     cfg: TrainConfig,
     run_dir: str | Path,
     on_epoch_end: Callable[[Trainer, dict[str, Any]], None] | None = None,
+    hooks: dict[str, TrainerHook] | None = None,
 ) -> TrainResult:
-    """Train from a validated config into ``run_dir`` (or the run being resumed)."""
-    return Trainer(cfg, run_dir, on_epoch_end).run()
+    """Train from a validated config into ``run_dir`` (or the run being resumed), with extra
+    ``hooks`` (:class:`Trainer`)."""
+    return Trainer(cfg, run_dir, on_epoch_end, hooks).run()

@@ -5,7 +5,7 @@ Each seed is a :class:`SeedRun`: the single-seed :class:`~s3rl_torchrl.trainer.T
 its own envs, replay buffer and sampler, actor, critics, alpha, Lagrangian controller,
 contrastive phase, counters, run directory ``<run dir>/seed<k>/`` and checkpoints, all built
 from its own seed exactly as a single-seed run builds them. What the group shares is the
-gradient step: :class:`~s3rl_torchrl.objectives.StackedSACLag` stacks the K losses' tensors
+gradient step: :class:`~s3rl_torchrl.algorithms.StackedSACLag` stacks the K losses' tensors
 and runs them as one vmapped forward and backward (the gradient step dominates a run's time
 and at these sizes it is overhead-bound, docs/benchmarks.md).
 
@@ -29,7 +29,7 @@ import torch
 from tensordict import TensorDictBase
 from tqdm.auto import tqdm
 
-from s3rl_torchrl.objectives.stacked import StackedSACLag, draw_noise
+from s3rl_torchrl.algorithms.stacked import StackedSACLag, draw_noise
 from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError, check_writable
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.loop import StopRequest, Trainer, TrainResult, compile_loss

@@ -18,7 +18,7 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError, load_checkpoint
-from s3rl_torchrl.trainer.config import TrainConfig, to_container, validate
+from s3rl_torchrl.trainer.config import TrainConfig, saved_config_node, to_container, validate
 
 __all__ = ["RESUME_LOCKED", "resume_config", "saved_config"]
 
@@ -30,6 +30,10 @@ RESUME_LOCKED = [
     "algo.lagrangian",
     "algo.lagrangian_cadence",
     "algo.contrastive",
+    # What every stored step carries (a graded label, hooks/labels.py) and how the buffer is
+    # partitioned: the buffer and the n-step transform's held frames were written with them.
+    "algo.contrastive_cfg.label",
+    "diagnostics.probes",
     "algo.buffer_size",
     "algo.n_step",
     "network.actor_hidden",
@@ -104,8 +108,7 @@ def resume_config(
         )
     saved = saved_config(run_dir)
     merged = OmegaConf.merge(
-        OmegaConf.structured(TrainConfig),
-        OmegaConf.create(saved),
+        saved_config_node(saved),
         OmegaConf.from_dotlist([o for o in overrides if not o.startswith("resume=")]),
     )
     merged.resume = str(run_dir)
@@ -113,7 +116,7 @@ def resume_config(
     current = to_container(cfg)
     # What the saved run had for every field, with the schema's defaults for fields it did not
     # know yet (a checkpoint of an older version): those are the values it ran with.
-    before = to_container(validate(OmegaConf.merge(OmegaConf.structured(TrainConfig), saved)))
+    before = to_container(validate(saved_config_node(saved)))
     locked = [
         f"{key}: the run has {_get(before, key)!r}, the override gives {_get(current, key)!r}"
         for key in RESUME_LOCKED

@@ -3,5 +3,15 @@
 from s3rl_torchrl.transforms.cost_label import CostLabel
 from s3rl_torchrl.transforms.cost_to_go import COST_TO_GO_KEY, CostToGo, discounted_cost_to_go
 from s3rl_torchrl.transforms.episode_sum import EpisodeSum
+from s3rl_torchrl.transforms.nstep import NStepTransform, make_nstep_transform, nstep_transition
 
-__all__ = ["COST_TO_GO_KEY", "CostLabel", "CostToGo", "EpisodeSum", "discounted_cost_to_go"]
+__all__ = [
+    "COST_TO_GO_KEY",
+    "CostLabel",
+    "CostToGo",
+    "EpisodeSum",
+    "NStepTransform",
+    "discounted_cost_to_go",
+    "make_nstep_transform",
+    "nstep_transition",
+]

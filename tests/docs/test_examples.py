@@ -11,7 +11,7 @@ import torch
 from torchrl.data import LazyTensorStorage, TensorDictReplayBuffer
 
 from s3rl_torchrl.data import SafeUnsafeSampler
-from s3rl_torchrl.objectives import make_nstep_transform
+from s3rl_torchrl.transforms import make_nstep_transform
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "objectives.md"
 # (as written in the docs, what the test runs instead): a few hundred frames, seconds.

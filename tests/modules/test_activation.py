@@ -113,6 +113,6 @@ def test_builders_use_it():
 
     actor = build_s3rl_actor(3, Bounded(-torch.ones(2), torch.ones(2), (2,)), hidden=(4, 4))
     assert sum(type(m) is ReLU for m in actor.modules()) == 2
-    from s3rl_torchrl.trainer.builders import ACTIVATIONS  # the recipes' network.activation
+    from s3rl_torchrl.modules import ACTIVATIONS  # the recipes' network.activation
 
     assert ACTIVATIONS["relu"] is ReLU

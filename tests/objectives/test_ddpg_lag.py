@@ -10,8 +10,9 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import Bounded, LazyTensorStorage, TensorDictReplayBuffer
 from torchrl.envs.utils import ExplorationType, set_exploration_type
-from torchrl.objectives import DDPGLoss, SoftUpdate
+from torchrl.objectives import DDPGLoss
 
+from s3rl_torchrl.algorithms import ContrastivePhase
 from s3rl_torchrl.data.sampler import SafeUnsafeSampler
 from s3rl_torchrl.modules import (
     build_ddpg_exploration,
@@ -19,13 +20,7 @@ from s3rl_torchrl.modules import (
     build_qvalue_network,
     get_policy_encoder,
 )
-from s3rl_torchrl.objectives import (
-    DDPGLagLoss,
-    SafetyInfoNCELoss,
-    ddpg_lag_update,
-    make_ddpg_lag_optimizers,
-)
-from s3rl_torchrl.trainer import ContrastivePhase
+from s3rl_torchrl.objectives import DDPGLagLoss, SafetyInfoNCELoss
 from tests.objectives._gradients import moved
 
 OBS, ACT, HIDDEN, GAMMA = 5, 2, (16, 16), 0.9
@@ -171,37 +166,6 @@ def test_gradient_isolation():
     assert moved(out["loss_actor"], groups) == {"actor": True, "critic": False, "cost_critic": False}
 
 
-def test_update_step_follows_fsrl_order_and_soft_update_covers_cost_critic():
-    loss, *_ = make_loss(1, lagrangian_init=0.3)
-    optimizers = make_ddpg_lag_optimizers(loss, actor_lr=1e-3, critic_lr=1e-3)
-    updater = SoftUpdate(loss, tau=0.05)
-    n_actor = sum(
-        p.numel() for p in loss.actor_network_params.values(True, True) if p.requires_grad
-    )
-    assert sum(p.numel() for g in optimizers.actor.param_groups for p in g["params"]) == n_actor
-    target_before = loss.target_cost_value_network_params.clone()
-    online_before = loss.cost_value_network_params.clone()
-    batch = make_batch()
-    # Expected actor loss: computed after a separate copy takes the same critic step.
-    twin, *_ = make_loss(1, lagrangian_init=0.3)
-    twin_opt = make_ddpg_lag_optimizers(twin, actor_lr=1e-3, critic_lr=1e-3)
-    critic = twin.critic_loss(batch.clone())
-    (critic["loss_value"] + critic["loss_cost_value"]).backward()
-    twin_opt.critic.step()
-    expected_actor, _ = twin.loss_actor(batch.clone())
-
-    stats = ddpg_lag_update(loss, batch, optimizers, updater)
-    torch.testing.assert_close(stats["loss_actor"], expected_actor.detach())
-    for key in ("weight", "bias"):
-        for path, target in target_before.items(True, True):
-            if path[-1] != key:
-                continue
-            online_after = loss.cost_value_network_params.get(path)
-            expected = 0.95 * target + 0.05 * online_after
-            torch.testing.assert_close(loss.target_cost_value_network_params.get(path), expected)
-            assert not torch.equal(online_after, online_before.get(path))
-
-
 def test_lagrangian_setter_validation_and_state_dict():
     loss, *_ = make_loss(2)
     loss.lagrangian = 0.5
@@ -322,28 +286,3 @@ def test_deterministic_actor_formula_and_init():
         build_deterministic_actor(OBS, spec, ())
     with pytest.raises(ValueError, match="sigma"):
         build_ddpg_exploration(actor, spec, sigma=-0.1)
-
-
-def test_update_step_with_torchrl_ddpgloss_follows_fsrl_order():
-    # Unconstrained DDPG (s3rl-train algo=ddpg): torchrl's DDPGLoss, same step without costs.
-    def ddpg():
-        actor, critic, _ = make_nets(1)
-        loss = DDPGLoss(actor, critic, delay_actor=True, delay_value=True)
-        loss.make_value_estimator(gamma=GAMMA)
-        return loss
-
-    loss, twin = ddpg(), ddpg()
-    optimizers = make_ddpg_lag_optimizers(loss, actor_lr=1e-3, critic_lr=1e-3)
-    batch = make_batch()
-    # Independent reference: torchrl's own losses, critic step first, then the actor loss.
-    twin_opt = make_ddpg_lag_optimizers(twin, actor_lr=1e-3, critic_lr=1e-3)
-    expected_value, _ = twin.loss_value(batch.clone())
-    expected_value.backward()
-    twin_opt.critic.step()
-    expected_actor, _ = twin.loss_actor(batch.clone())
-
-    stats = ddpg_lag_update(loss, batch, optimizers, SoftUpdate(loss, tau=0.05))
-    assert set(stats.keys()) == {"loss_actor", "loss_value", "reward_q"}
-    torch.testing.assert_close(stats["loss_value"], expected_value.detach())
-    torch.testing.assert_close(stats["loss_actor"], expected_actor.detach())
-    torch.testing.assert_close(stats["reward_q"], -expected_actor.detach())

@@ -86,8 +86,9 @@ def test_train_then_evaluate(tmp_path):
 
 def test_a_compiled_run_prints_no_third_party_noise(tmp_path):
     # What `make train` printed: tensordict's FutureWarning about a torch._dynamo option, its
-    # lock_() warning under torch.compile (ours: SACLagLoss no longer locks inside the graph)
-    # and MuJoCo's settotalmass deprecation (Gymnasium's half_cheetah.xml). None of them now.
+    # lock_() warning under torch.compile (torchrl's vmap of the critics' parameters, as in
+    # SACLoss) and MuJoCo's settotalmass deprecation (Gymnasium's half_cheetah.xml). None of
+    # them now.
     out = run(
         "s3rl-train", *TINY, "algo=sac_lag", "compile=true", f"hydra.run.dir={tmp_path / 'r'}",
         cwd=tmp_path,

@@ -44,6 +44,28 @@ def test_in_place_changes_reach_the_compiled_loss_without_recompiling():
 
 
 @pytest.mark.slow
+def test_tensordicts_memo_of_types_does_not_recompile_the_loss():
+    # tensordict memoises its type checks in a dict whose length dynamo guards; an eager vmap
+    # (the critic diagnostics, at an epoch's end) adds `tuple` to it after the first compile.
+    from tensordict import utils
+
+    loss, *_ = make_loss()
+    compiled = compile_loss(loss)
+    batch = make_batch()
+    compiled(batch.copy())
+
+    class NewType:
+        pass
+
+    before = len(utils._TENSORCLASS_MEMO)
+    utils._is_tensorclass(NewType)
+    assert len(utils._TENSORCLASS_MEMO) == before + 1
+    loss.critic_values(batch)  # eager
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        compiled(batch.copy())
+
+
+@pytest.mark.slow
 def test_grad_mode_is_still_guarded():
     # Global state keeps its guards: the loss called without grad is traced anew, no stale graph.
     loss, *_ = make_loss()

@@ -6,16 +6,27 @@ import pytest
 from hydra.errors import ConfigCompositionException
 from omegaconf.errors import ValidationError
 
+from s3rl_torchrl.algorithms import ALGORITHMS, DDPGConfig, PPOConfig, SACConfig, family_of
+from s3rl_torchrl.algorithms.schedule import OffPolicySchedule, OnPolicySchedule
 from s3rl_torchrl.envs import task_names
 from s3rl_torchrl.trainer import ConfigError, TrainConfig, validate
 from s3rl_torchrl.trainer.config import ALGO_NAMES
-from s3rl_torchrl.trainer.schedule import OffPolicySchedule, OnPolicySchedule
+
+
+def schedule_of(cfg):
+    return family_of(cfg.algo).schedule(cfg.collector, cfg.algo)
 
 
 def test_defaults_are_quick_s3rl_on_half_cheetah(compose):
     cfg = validate(compose())
     assert cfg.task.name == "SafetyHalfCheetahVelocity-v1"
-    assert cfg.algo.name == "s3rl" and cfg.algo.lagrangian == "pid" and cfg.algo.contrastive
+    assert cfg.algo.name == "s3rl" and cfg.algo.contrastive
+    # The quick run keeps its limit on every seed (docs/recipes.md): the per-step learned
+    # multiplier and the sound critics (configs/experiment/quick.yaml).
+    assert (cfg.algo.lagrangian, cfg.algo.lagrangian_cadence) == ("learned", "step")
+    assert (cfg.algo.cost_critic_read, cfg.algo.entropy_rescaling) == ("max", False)
+    unconstrained = validate(compose("algo=sac"))
+    assert unconstrained.algo.lagrangian == "none"
 
 
 @pytest.mark.parametrize("algo", ALGO_NAMES)
@@ -27,11 +38,12 @@ def test_every_algo_and_experiment_composes(algo, experiment, compose):
     assert (cfg.algo.lagrangian != "none") == expect_lag
     assert cfg.algo.contrastive == algo.startswith("s3rl")
     family = "ddpg" if "ddpg" in algo else "ppo" if "ppo" in algo else "sac"
-    assert cfg.algo.family == family
-    # DDPG steps in FSRL's order (critics, then the actor); the SAC family keeps its default.
-    assert cfg.algo.update_order == ("fsrl" if "ddpg" in algo else "joint")
-    schedule = type(cfg.algo.schedule(cfg.collector))
-    assert schedule is (OnPolicySchedule if family == "ppo" else OffPolicySchedule)
+    assert family_of(cfg.algo).name == family == ALGORITHMS[algo].family.name
+    # Each family's config class, with its own fields only.
+    assert type(cfg.algo) is {"sac": SACConfig, "ddpg": DDPGConfig, "ppo": PPOConfig}[family]
+    assert hasattr(cfg.algo, "update_order") == (family == "sac")
+    assert hasattr(cfg.algo, "n_step") == (family != "ppo")
+    assert isinstance(schedule_of(cfg), OnPolicySchedule if family == "ppo" else OffPolicySchedule)
 
 
 @pytest.mark.parametrize("algo", ["ppo_lag", "ppo", "s3rl_ppo_lag"])
@@ -48,16 +60,53 @@ def test_ppo_family_has_fsrl_ppo_lag_defaults(algo, compose):
     assert a.cost_surrogate == "unclipped" and (a.pid.kp, a.pid.ki, a.pid.kd) == (0.05, 5e-4, 0.1)
 
 
+def test_ddpg_options_are_checked(compose):
+    with pytest.raises(ConfigError, match="'algo.exploration_noise'"):
+        validate(compose("algo=ddpg", "algo.exploration_noise=-0.1"))
+    # DDPG steps in FSRL's order only: it has no update_order to set.
+    with pytest.raises(ConfigCompositionException):
+        compose("algo=ddpg_lag", "algo.update_order=joint")
+
+
 @pytest.mark.parametrize(
-    ("overrides", "match"),
+    ("algo", "field"),
     [
-        (("algo=ddpg_lag", "algo.update_order=joint"), "'algo.update_order': DDPG"),
-        (("algo=ddpg", "algo.exploration_noise=-0.1"), "'algo.exploration_noise'"),
+        ("ppo_lag", "algo.n_step=3"),
+        ("ppo", "algo.alpha_lr=1e-3"),
+        ("ddpg_lag", "algo.ppo_epochs=2"),
+        ("sac_lag", "algo.exploration_noise=0.2"),
+        ("ddpg_lag", "algo.cost_critic_read=max"),
     ],
 )
-def test_ddpg_options_are_checked(overrides, match, compose):
-    with pytest.raises(ConfigError, match=match):
-        validate(compose(*overrides))
+def test_a_field_of_another_family_is_refused_at_composition(algo, field, compose):
+    with pytest.raises(ConfigCompositionException) as err:
+        compose(f"algo={algo}", field)
+    assert field.split("=")[0].split(".")[1] in str(err.value)
+
+
+def test_the_sound_critics_are_the_sac_familys(compose):
+    cfg = validate(compose("algo=sac_lag", "critic=sound"))
+    assert (cfg.algo.cost_critic_read, cfg.algo.cost_nonnegative) == ("max", True)
+    assert (cfg.algo.cost_entropy, cfg.algo.entropy_rescaling) == (False, False)
+    # experiment=paper has FSRL's (the default critic=fsrl, SACConfig's defaults); the default
+    # experiment=quick picks the sound ones.
+    paper = validate(compose("algo=sac_lag", "experiment=paper")).algo
+    assert paper == validate(compose("algo=sac_lag", "experiment=paper", "critic=fsrl")).algo
+    assert paper.cost_critic_read == "min" and paper.entropy_rescaling
+    assert validate(compose("algo=sac_lag")).algo.cost_critic_read == "max"
+    # The other families have no cost-critic pair: they ignore the choice (a preset sets it
+    # whatever the algorithm), and their config has none of its fields.
+    ppo = validate(compose("algo=ppo_lag", "critic=sound"))
+    assert not hasattr(ppo.algo, "cost_critic_read")
+
+
+def test_an_algorithm_name_with_another_familys_yaml_is_refused(compose):
+    # algo=s3rl composes the SAC family's config; renaming it to a PPO algorithm does not make
+    # it one.
+    with pytest.raises(ConfigError, match="'algo.name'.*PPO algorithm.*algo=ppo_lag"):
+        validate(compose("algo=s3rl", "algo.name=ppo_lag"))
+    with pytest.raises(ConfigError, match="'algo.name': allowed values are s3rl"):
+        validate(compose("algo.name=trpo"))
 
 
 @pytest.mark.parametrize(
@@ -121,8 +170,8 @@ def test_paper_collect_follows_an_override_of_the_batch(compose):
 
 
 def test_pid_options_fsrl_by_default_and_the_damped_ema(compose):
+    from s3rl_torchrl.algorithms import build_lagrangian
     from s3rl_torchrl.objectives import PIDLagrangian
-    from s3rl_torchrl.trainer.builders import build_lagrangian
 
     for overrides in [(), ("pid=fsrl",), ("experiment=paper", "algo=sac_lag")]:
         pid = validate(compose(*overrides)).algo.pid
@@ -154,9 +203,10 @@ def test_pid_options_fsrl_by_default_and_the_damped_ema(compose):
 def test_pid_omnisafe_is_sacpid_per_gradient_step(compose):
     # OmniSafe's SACPID.yaml: pid_kp 1e-6, pid_ki 1e-7, pid_kd 1e-7, pid_d_delay 10, both EMAs
     # 0.95; pid_lagrange.py: ki inside the integral, cost history from 0, sum_norm (no cap).
-    from s3rl_torchrl.trainer.builders import build_lagrangian
+    from s3rl_torchrl.algorithms import build_lagrangian
 
-    cfg = validate(compose("algo=sac_lag", "pid=omnisafe", "algo.lagrangian_cadence=step"))
+    cfg = validate(compose("algo=sac_lag", "pid=omnisafe", "algo.lagrangian=pid",
+                           "algo.lagrangian_cadence=step"))
     pid = cfg.algo.pid
     assert (pid.kp, pid.ki, pid.kd, pid.ema_alpha, pid.derivative_delay) == (
         1e-6, 1e-7, 1e-7, 0.95, 10,
@@ -267,11 +317,8 @@ def test_compile_without_a_cpp_compiler_fails_before_training(compose):
 def test_planned_gradient_steps_by_hand(overrides, steps, compose):
     from omegaconf import OmegaConf
 
-    from s3rl_torchrl.trainer.schedule import planned_gradient_steps
-
-    merged = OmegaConf.merge(OmegaConf.structured(TrainConfig), compose(*overrides))
-    cfg = OmegaConf.to_object(merged)
-    assert planned_gradient_steps(cfg.collector, cfg.algo) == steps
+    cfg = OmegaConf.to_object(compose(*overrides))  # not validated: some cannot learn
+    assert schedule_of(cfg).planned_gradient_steps() == steps
 
 
 def _batch_frames(frames: int) -> tuple[str, str]:
@@ -309,11 +356,9 @@ def _batch_frames(frames: int) -> tuple[str, str]:
     ],
 )
 def test_planned_on_policy_gradient_steps_by_hand(overrides, steps, compose):
-    from s3rl_torchrl.trainer.schedule import planned_gradient_steps
-
     cfg = validate(compose("algo=ppo_lag", "compile=false", *overrides))
-    assert planned_gradient_steps(cfg.collector, cfg.algo) == steps
-    assert cfg.algo.schedule(cfg.collector).warmup_frames() == 0
+    assert schedule_of(cfg).planned_gradient_steps() == steps
+    assert schedule_of(cfg).warmup_frames() == 0
 
 
 def test_a_run_that_cannot_learn_is_refused(compose):

@@ -9,6 +9,7 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from s3rl_torchrl.algorithms import ALGORITHMS, SAC
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
@@ -17,7 +18,6 @@ from s3rl_torchrl.trainer import (
     train,
     train_seeds,
 )
-from s3rl_torchrl.trainer.config import ALGO_FAMILIES
 from s3rl_torchrl.trainer.metrics import read_metrics
 from tests.trainer.test_train import FINAL_EVAL_KEYS, expected_grad_steps
 
@@ -25,7 +25,7 @@ SEEDS = [11, 12]
 
 
 # The SAC family (the DDPG family is refused: test_bad_seeds_fail_before_training).
-@pytest.mark.parametrize("algo", [name for name, f in ALGO_FAMILIES.items() if f == "sac"])
+@pytest.mark.parametrize("algo", [name for name, a in ALGORITHMS.items() if a.family is SAC])
 def test_each_seed_writes_a_single_runs_files(algo, tiny_config, tmp_path):
     # Swimmer-v1 pays costs under a random policy now and then: the contrastive phase runs.
     cfg = tiny_config(f"algo={algo}", "task=SafetySwimmerVelocity-v1", "task.cost_limit=0",

@@ -14,7 +14,7 @@ from s3rl_torchrl.trainer import Trainer
 def test_each_collect_gets_ppo_epochs_passes_of_minibatches(tiny_config, tmp_path, monkeypatch):
     # tiny: 6 collects of 100 frames, minibatch 32, 4 epochs: per collect 4 passes of
     # minibatches of 32, 32, 32 and 4 transitions, each pass a permutation of the 100.
-    cfg = tiny_config("algo=ppo_lag")
+    cfg = tiny_config("algo=ppo_lag", "diagnostics.probes=true")
     seen = []
     original = Trainer._update
 
@@ -39,8 +39,8 @@ def test_each_collect_gets_ppo_epochs_passes_of_minibatches(tiny_config, tmp_pat
     stored = set(rollout[:].keys(True, True))
     assert {"advantage", "value_target", "cost_advantage", "cost_value_target"} <= stored
     # The labelled FIFO keeps the states, their safe/unsafe label and their cost-to-go only
-    # (what the contrastive sampler and the two probes read), every collected frame while it
-    # has room.
+    # (what the contrastive sampler and the two probes read; the probes are on here), every
+    # collected frame while it has room.
     labelled = set(trainer.replay_buffer[:].keys(True, True))
     assert labelled == {"observation", ("next", "safe"), ("next", "cost_to_go"), "index"}
     assert len(trainer.replay_buffer) == cfg.collector.total_frames
