@@ -106,3 +106,13 @@ def test_wheel_in_a_fresh_venv_trains_from_another_directory(tmp_path):
     out = _run([str(env_dir / "bin" / "s3rl-eval"), f"checkpoint={run_dir}", "episodes=1",
                 "max_steps=10", f"hydra.run.dir={tmp_path / 'eval'}"], cwd=elsewhere, env=clean_env)
     assert json.loads((tmp_path / "eval" / "eval.json").read_text())["length_mean"] == 10.0
+
+
+def test_test_modules_have_unique_names():
+    # tests/ has no __init__.py (pytest's default rootdir import): two test files of one name in
+    # different folders fail the whole run at collection, "import file mismatch".
+    names: dict[str, list[str]] = {}
+    for path in sorted((ROOT / "tests").rglob("test_*.py")):
+        names.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
+    clashes = {name: paths for name, paths in names.items() if len(paths) > 1}
+    assert not clashes, f"test modules sharing a name: {clashes}"

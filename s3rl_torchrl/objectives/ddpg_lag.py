@@ -29,13 +29,10 @@ from torch import Tensor
 from torchrl.objectives import DDPGLoss
 from torchrl.objectives.utils import ValueEstimators, _cache_values, distance_loss
 
+from s3rl_torchrl.objectives._common import next_key as _next
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["DDPGLagLoss"]
-
-
-def _next(key: NestedKey) -> tuple[str, ...]:
-    return ("next", *key) if isinstance(key, tuple) else ("next", key)
 
 
 class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):

@@ -41,16 +41,13 @@ from torchrl.objectives.ppo import _broadcast_advantage_to_log_weight, _clip_val
 from torchrl.objectives.utils import ValueEstimators, _cache_values, distance_loss
 from torchrl.objectives.value import GAE
 
+from s3rl_torchrl.objectives._common import next_key as _next
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["COST_SURROGATES", "PPOLagLoss"]
 
 #: The cost term of the policy loss: FSRL's unclipped one or OmniSafe's clipped surrogate.
 COST_SURROGATES = ("unclipped", "clipped")
-
-
-def _next(key: NestedKey) -> tuple[str, ...]:
-    return ("next", *key) if isinstance(key, tuple) else ("next", key)
 
 
 class PPOLagLoss(LagrangianBufferMixin, ClipPPOLoss):

@@ -25,7 +25,6 @@ gradient steps that use it are in ``s3rl_torchrl/algorithms/sac.py``.
 from __future__ import annotations
 
 import contextlib
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -39,6 +38,8 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives.sac import SACLoss, compute_rsample_log_prob
 from torchrl.objectives.utils import ValueEstimators, _cache_values, _vmap_func, distance_loss
 
+from s3rl_torchrl.objectives._common import check_arguments, detached
+from s3rl_torchrl.objectives._common import next_key as _next
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["COST_CRITIC_READS", "SACLagLoss"]
@@ -50,34 +51,6 @@ COST_CRITIC_READS = ("min", "max", "mean")
 # What SACLoss.forward clears the weak references of, and the cost critics'.
 _NETWORKS = ("actor", "qvalue", "cost_qvalue")
 _PARAMETER_CONTAINERS = [f"{t}{n}_network_params" for t in ("", "target_") for n in _NETWORKS]
-
-
-def _detached(params: TensorDictBase) -> TensorDictBase:
-    """``params.detach()`` (SACLoss's) without locking the copy: ``detach()`` of locked
-    ``TensorDictParams`` locks its result, and tensordict warns about a ``lock_()`` inside a
-    compiled graph at every compile of the loss."""
-    return params.apply(Tensor.detach, filter_empty=True)
-
-
-def _next(key: NestedKey) -> tuple[str, ...]:
-    return ("next", *key) if isinstance(key, tuple) else ("next", key)
-
-
-def _check_arguments(networks: dict, counts: dict, choices: dict, alpha_init: float) -> None:
-    """Constructor arguments: ``networks`` name -> (module or list, the critics it holds)."""
-    for name, (value, low) in counts.items():
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value!r}.")
-    for name, (value, allowed) in choices.items():
-        if value not in allowed:
-            valid = ", ".join(map(repr, allowed))
-            raise ValueError(f"Unknown {name} {value!r}; valid choices are {valid}.")
-    if not (alpha_init > 0 and math.isfinite(alpha_init)):
-        raise ValueError(f"alpha_init must be a positive finite number, got {alpha_init!r}.")
-    for name, (module, expected) in networks.items():
-        if isinstance(module, (list, tuple)) and len(module) != expected:
-            count = f"{name} is a list of {len(module)} modules; it must hold {expected}"
-            raise ValueError(f"{count} (one per cost and critic), or pass one module.")
 
 
 class SACLagLoss(LagrangianBufferMixin, SACLoss):
@@ -159,7 +132,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
                 if num_costs
                 else "num_costs=0 means no cost critic, but a cost_qvalue_network was given."
             )
-        _check_arguments(
+        check_arguments(
             networks={
                 "qvalue_network": (qvalue_network, num_qvalue_nets),
                 "cost_qvalue_network": (cost_qvalue_network, num_qvalue_nets * num_costs),
@@ -258,12 +231,12 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
     @property
     @_cache_values
     def _cached_detached_qvalue_params(self):
-        return _detached(self.qvalue_network_params)
+        return detached(self.qvalue_network_params)
 
     @property
     @_cache_values
     def _cached_detached_cost_qvalue_params(self):  # detached tensors share storage: current
-        return _detached(self.cost_qvalue_network_params)
+        return detached(self.cost_qvalue_network_params)
 
     def read_cost(self, q_cost: Tensor) -> Tensor:
         """The cost critics ``[m, N, *B]`` read into one value per cost ``[m, *B]``
