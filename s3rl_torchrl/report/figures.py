@@ -192,9 +192,18 @@ def critic_diagnostics(
         axes[-1, col].set_ylim(-0.02, 1.02)
         axes[-1, col].set_xlabel("environment steps")
         axes[-1, col].xaxis.set_major_formatter(_frames_formatter())
-        axes[-1, col].legend(fontsize=7, loc="lower right")
+    # One legend for all columns, below them: a selection's group labels are long and would
+    # cover the curves inside an axis.
+    handles: dict[str, object] = {}
+    for ax in axes.flat:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    legend_share = min(0.4, 0.02 + 0.016 * len(handles))  # of the figure's height
+    fig.set_size_inches(fig.get_figwidth(), 11.0 / (1.0 - legend_share))
+    fig.legend(list(handles.values()), list(handles), loc="lower center", fontsize=8,
+               frameon=False)
     fig.suptitle("Critic diagnostics (mean over seeds; dashed: the returns that followed)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, legend_share, 1.0, 1.0))
     paths = _save(fig, out_dir, "critic_diagnostics")
     plt.close(fig)
     return paths

@@ -138,7 +138,31 @@ def setting_name(config: dict) -> str:
             f" step(window={algo['lagrangian_window']},"
             f"warmup={algo['lagrangian_warmup_frames']})"
         )
+    name += _critic_setting(algo)
     return f"{name} batch={collector['frames_per_batch']}"
+
+
+# FSRL's cost critics (critic=fsrl), which runs from before the option also had.
+_FSRL_CRITICS = {"cost_critic_read": "min", "cost_nonnegative": False, "cost_entropy": True,
+                 "entropy_rescaling": True}
+
+
+def _critic_setting(algo: dict) -> str:
+    """What else a SAC-family selection varies, when it differs from FSRL's and the paper's:
+    the cost critics (``critic=sound`` is ``sound(read=max)``), their own discount, the
+    gradient steps per frame (the paper's 0.2). Empty for the runs the label had before."""
+    label = ""
+    if "cost_critic_read" in algo:
+        critics = {key: algo.get(key, default) for key, default in _FSRL_CRITICS.items()}
+        if critics != _FSRL_CRITICS:
+            sound = critics["cost_nonnegative"] and not critics["cost_entropy"]
+            sound = sound and not critics["entropy_rescaling"]
+            label += f" {'sound' if sound else 'critic'}(read={critics['cost_critic_read']})"
+    if algo.get("cost_gamma") is not None:
+        label += f" cost_gamma={algo['cost_gamma']}"
+    if "cost_critic_read" in algo and algo.get("update_per_step", 0.2) != 0.2:
+        label += f" ups={algo['update_per_step']}"
+    return label
 
 
 def lambda_updates(run_dir: Path) -> list[tuple[float, float]]:

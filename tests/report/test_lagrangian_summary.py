@@ -199,3 +199,24 @@ def test_a_report_of_a_directory_named_like_a_subcommand_is_written_with_a_path(
     # The report's own arguments are as before: RUNS first, then its options.
     args = parse_args(["./lagrangian", "--out", str(tmp_path)])
     assert (args.runs, args.out) == ("./lagrangian", str(tmp_path))
+
+
+def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
+    config = {
+        "algo": {"lagrangian": "learned", "lagrangian_lr": 3e-6, "lagrangian_cadence": "step",
+                 "lagrangian_window": 20, "lagrangian_warmup_frames": 100000,
+                 "cost_critic_read": "min", "cost_nonnegative": False, "cost_entropy": True,
+                 "entropy_rescaling": True, "cost_gamma": None, "update_per_step": 0.2},
+        "collector": {"frames_per_batch": 1000},
+    }
+    base = "learned(lr=3e-06) step(window=20,warmup=100000)"
+    assert ld.setting_name(config) == f"{base} batch=1000"  # FSRL's critics: as before
+    config["algo"] |= {"cost_critic_read": "max", "cost_nonnegative": True,
+                       "cost_entropy": False, "entropy_rescaling": False}
+    assert ld.setting_name(config) == f"{base} sound(read=max) batch=1000"
+    config["algo"] |= {"cost_critic_read": "mean", "cost_gamma": 0.9, "update_per_step": 0.5}
+    expected = f"{base} sound(read=mean) cost_gamma=0.9 ups=0.5 batch=1000"
+    assert ld.setting_name(config) == expected
+    config["algo"]["cost_nonnegative"] = False
+    assert "critic(read=mean)" in ld.setting_name(config)
+
