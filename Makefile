@@ -61,6 +61,11 @@ BINARY = s3rl (algo.contrastive_cfg.label=binary)
 # metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
 # Table 2 comparison of algorithms, the experiment=safe evidence, and the 300k-frame
 # experiment=safe runs (SafetyPointGoal1, graded labels).
+# What the critic selection's runs differ in besides the task (configs/sweep/critic_*.yaml).
+SELECTION_GROUPS = --group-by algo.cost_critic_read --group-by algo.cost_nonnegative \
+	--group-by algo.lagrangian_lr --group-by algo.lagrangian_warmup_frames \
+	--group-by algo.update_per_step
+
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/s3rl-report lagrangian results/reproduction/*/seed* \
@@ -74,6 +79,10 @@ report: $(STAMP)
 		--out docs/safe_300k/lagrangian.json --plot docs/safe_300k/lagrangian.png
 	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
 		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
+	$(BIN)/s3rl-report benchmarks/results/critic_selection --no-embeddings --no-aggregate \
+		--reference sac_lag --out docs/critic_selection $(SELECTION_GROUPS)
+	$(BIN)/s3rl-report lagrangian benchmarks/results/critic_selection/*/*/seed* \
+		--out docs/critic_selection/lagrangian.json --plot docs/critic_selection/lagrangian.png
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache

@@ -398,3 +398,17 @@ def test_safe_preset_reads_the_task_registry(compose):
     assert mine.algo.lagrangian_lr == 1e-5 and mine.task.cost_limit == 10.0
     paper = validate(compose("experiment=paper", "task=SafetyPointGoal1-v0"))
     assert paper.task.cost_limit == 10.0 and paper.algo.lagrangian_warmup_frames == 0
+
+
+def test_safe_preset_has_the_sound_critics_and_paper_fsrls(compose):
+    safe = validate(compose("experiment=safe", "algo=sac_lag"))
+    assert (safe.algo.cost_critic_read, safe.algo.cost_nonnegative) == ("max", True)
+    assert (safe.algo.cost_entropy, safe.algo.entropy_rescaling) == (False, False)
+    s3rl = validate(compose("experiment=safe", "algo=s3rl"))
+    assert s3rl.algo.cost_critic_read == "max" and not s3rl.algo.entropy_rescaling
+    # Still a choice: critic=fsrl on the command line gives FSRL's under the safe schedule.
+    fsrl = validate(compose("experiment=safe", "algo=sac_lag", "critic=fsrl"))
+    assert (fsrl.algo.cost_critic_read, fsrl.algo.entropy_rescaling) == ("min", True)
+    assert fsrl.algo.lagrangian_cadence == safe.algo.lagrangian_cadence == "step"
+    paper = validate(compose("experiment=paper", "algo=sac_lag"))
+    assert (paper.algo.cost_critic_read, paper.algo.cost_nonnegative) == ("min", False)
