@@ -150,7 +150,7 @@ _FSRL_CRITICS = {"cost_critic_read": "min", "cost_nonnegative": False, "cost_ent
 def _critic_setting(algo: dict) -> str:
     """What else a SAC-family selection varies, when it differs from FSRL's and the paper's:
     the cost critics (``critic=sound`` is ``sound(read=max)``), their own discount, the
-    gradient steps per frame (the paper's 0.2). Empty for the runs the label had before."""
+    gradient steps per frame (the paper's 0.2). Empty for the paper's runs with FSRL's critics."""
     label = ""
     if "cost_critic_read" in algo:
         critics = {key: algo.get(key, default) for key, default in _FSRL_CRITICS.items()}

@@ -24,7 +24,7 @@ def test_launch_a_group_of_seeds_in_one_process_then_skip_it(tmp_path, capsys):
     report = ld.main(args)
     (row,) = report["settings"]
     assert row["algo"] == "s3rl" and row["seeds"] == [1, 2] and row["frames"] == 400
-    assert row["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
+    assert row["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) ups=0.25 batch=100"
     # Any algo but SAC-Lag gets its own level, so its groups never resume SAC-Lag's.
     group = tmp_path / "runs" / "SafetyHalfCheetahVelocity-v1" / "s3rl" / "pid_ema"
     assert (group / "seeds.json").is_file()
@@ -45,8 +45,8 @@ def test_launch_two_settings_of_tiny_runs_then_skip_them(tmp_path, capsys):
     args += ["--frames", "400", "--no-compile", "--jobs", "2", "--runs-dir", str(tmp_path / "runs")]
     report = ld.main([*args, "--csv-dir", str(tmp_path / "csv")])
     fsrl, ema = sorted(report["settings"], key=lambda r: "ema" in r["setting"])
-    assert fsrl["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) batch=100"
-    assert ema["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) batch=100"
+    assert fsrl["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1) ups=0.25 batch=100"
+    assert ema["setting"] == "pid(kp=0.05,ki=0.0005,kd=0.1,ema=0.95,delay=10) ups=0.25 batch=100"
     for row in (fsrl, ema):
         assert row["frames"] == 400 and row["seeds"] == [1]
         assert not math.isnan(row["eval_reward"]) and not math.isnan(row["final_reward"])
