@@ -26,6 +26,7 @@ from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
+    RunInUseError,
     TrainConfig,
     TrainResult,
     register_configs,
@@ -39,7 +40,7 @@ from s3rl_torchrl.trainer.resume import resume_config
 CONFIG_DIR = str(config_dir())
 register_configs()
 
-REJECTED = (ConfigError, CheckpointError, FileExistsError)
+REJECTED = (ConfigError, CheckpointError, FileExistsError, RunInUseError)
 
 
 def reject(err: Exception, output: HydraOutput) -> NoReturn:

@@ -32,6 +32,7 @@ from s3rl_torchrl.trainer.config import (
 from s3rl_torchrl.trainer.evaluation import EvalResult, evaluate, format_table
 from s3rl_torchrl.trainer.loop import Counters, Trainer, TrainResult, compile_loss, train
 from s3rl_torchrl.trainer.multiseed import MultiSeedResult, MultiSeedTrainer, train_seeds
+from s3rl_torchrl.trainer.run_lock import RunInUseError
 
 __all__ = [
     "AlgoConfig",
@@ -50,6 +51,7 @@ __all__ = [
     "MultiSeedTrainer",
     "NetworkConfig",
     "PIDConfig",
+    "RunInUseError",
     "TaskConfig",
     "TrainConfig",
     "TrainResult",

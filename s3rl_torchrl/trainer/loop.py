@@ -85,6 +85,7 @@ from s3rl_torchrl.trainer.evaluation import (
 )
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
 from s3rl_torchrl.trainer.resume import RESUME_LOCKED
+from s3rl_torchrl.trainer.run_lock import RunLock
 
 FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
@@ -220,6 +221,8 @@ class Trainer:
             # Before anything is built or written, so that run's files stay as they are.
             ensure_new_run_dir(self.run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        # No second process may train into this directory until the loop ends (run_lock.py).
+        self.run_lock = RunLock(self.run_dir)
 
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
@@ -340,6 +343,7 @@ class Trainer:
                 collector.shutdown()
             progress.close()
             self.stop.uninstall()
+            self.run_lock.release()
 
     def _finish_batch(self) -> bool:
         """Gradient steps owed, then the epoch's end if the batch closed one. False: stopped."""

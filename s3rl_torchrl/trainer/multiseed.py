@@ -207,6 +207,8 @@ class MultiSeedTrainer:
                     collector.shutdown()
             progress.close()
             self.stop.uninstall()
+            for member in self.members:
+                member.run_lock.release()
 
     def _finish_batch(self) -> bool:
         """The gradient steps owed, then each seed's epoch end. False: stopped."""
