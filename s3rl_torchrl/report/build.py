@@ -530,8 +530,8 @@ def build_report(
             "discounted returns that followed them, alpha, and the share of the actor's gradient "
             "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\"). "
             "Runs written before those columns existed count their negative cost critics on "
-            "`train/cost_q` (the last gradient step's batch mean at `a ~ pi`) and show `-` for "
-            "the rest.",
+            "`train/cost_q` (the last gradient step's batch mean at `a ~ pi`), draw it and "
+            "`train/reward_q` dotted in the figure, and show `-` for the rest.",
             "",
             *_critic_table(diagnosed),
             "",

@@ -152,6 +152,9 @@ CRITIC_PANELS = (
     ("alpha", [("train/alpha", "-")], True),
     ("cost share of |grad|", [("grad/cost_share", "-")], False),
 )
+#: Runs from before the critic diagnostics have no critic/*: their critics are drawn dotted from
+#: the last gradient step's batch means at a ~ pi, which every version logs.
+CRITIC_FALLBACK = {"critic/cost_q": "train/cost_q", "critic/reward_q": "train/reward_q"}
 
 
 def critic_diagnostics(
@@ -176,9 +179,12 @@ def critic_diagnostics(
             for row, (_, columns, _log) in enumerate(CRITIC_PANELS):
                 for column, style in columns:
                     frames, mean, _ = learning_curve(group, column)
+                    if not len(frames) and column in CRITIC_FALLBACK:
+                        frames, mean, _ = learning_curve(group, CRITIC_FALLBACK[column])
+                        style = ":"
                     if not len(frames):
                         continue
-                    label = f"{group.label} ({len(group.runs)} seeds)" if style == "-" else None
+                    label = f"{group.label} ({len(group.runs)} seeds)" if style != "--" else None
                     axes[row, col].plot(frames, mean, style, color=colour, label=label)
         axes[0, col].set_title(task, fontsize=10)
         for row, (label, _, log) in enumerate(CRITIC_PANELS):
@@ -202,7 +208,10 @@ def critic_diagnostics(
     fig.set_size_inches(fig.get_figwidth(), 11.0 / (1.0 - legend_share))
     fig.legend(list(handles.values()), list(handles), loc="lower center", fontsize=8,
                frameon=False)
-    fig.suptitle("Critic diagnostics (mean over seeds; dashed: the returns that followed)")
+    fig.suptitle(
+        "Critic diagnostics (mean over seeds; dashed: the returns that followed; dotted: runs "
+        "without critic/*, train/*_q)"
+    )
     fig.tight_layout(rect=(0.0, legend_share, 1.0, 1.0))
     paths = _save(fig, out_dir, "critic_diagnostics")
     plt.close(fig)

@@ -409,3 +409,52 @@ def test_graded_probe_table_names_the_trained_and_the_probed_label(tmp_path, mak
     make_run(tmp_path / "old" / "s3rl_seed1", TASK, "s3rl", 1)
     old = build_report(tmp_path / "old", tmp_path / "rep3", embeddings=False)
     assert "graded probe" not in old.path.read_text()
+
+
+def test_critic_diagnostics_table_and_figure_by_hand(tmp_path, make_run, monkeypatch):
+    # A run with the critic diagnostics and one from before them (train/cost_q only).
+    new = {
+        "frames": [200, 400, 600, 800, 1000],
+        "eval/reward": [1.0, 2.0, 3.0, 4.0, 5.0], "eval/cost": [5.0] * 5,
+        "train/alpha": [0.01, 0.02, 0.5, 0.04, 0.03],
+        "train/cost_q": [1.0, 2.0, 3.0, 4.0, 5.0],
+        "critic/cost_q": [-1.0, 2.0, -3.0, 4.0, 6.0],
+        "critic/cost_return": [1.0, 1.0, 1.0, 1.0, 2.0],
+        "critic/cost_error": [-2.0, 1.0, -4.0, 3.0, 4.0],
+        "grad/reward": [1.0] * 5, "grad/entropy": [1.0] * 5, "grad/cost": [0.0, 1.0, 2.0, 2.0, 6.0],
+    }
+    old = {"frames": [200, 400, 600, 800, 1000], "eval/reward": [1.0] * 5, "eval/cost": [5.0] * 5,
+           "train/alpha": [0.01, 7.0, 70.0, 700.0, 7000.0],
+           "train/cost_q": [-1.0, -2.0, 3.0, -4.0, -5.0], "train/reward_q": [9.0] * 5}
+    make_run(tmp_path / "runs" / "new", TASK, "sac_lag", 1, curve=new)
+    make_run(tmp_path / "runs" / "old", TASK, "s3rl", 1, curve=old)
+    from s3rl_torchrl.report import figures
+
+    drawn = {}
+    real_save = figures._save
+
+    def keep(fig, out_dir, name):
+        if name == "critic_diagnostics":
+            drawn["axes"] = fig.axes
+            drawn["lines"] = [[(line.get_label(), line.get_linestyle(), list(line.get_ydata()))
+                               for line in ax.get_lines()] for ax in fig.axes]
+        return real_save(fig, out_dir, name)
+
+    monkeypatch.setattr(figures, "_save", keep)
+    report = build_report(tmp_path / "runs", tmp_path / "report", embeddings=False)
+    text = report.path.read_text()
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines()
+             if line.startswith(f"| {TASK} |")]
+    rows = {c[1]: c[2:] for c in cells if len(c) == 6 and c[2].endswith("%")}
+    # new: 2 of 5 critic/cost_q below 0; error over the last 20% (1 epoch): 4.0; alpha max 0.5;
+    # cost share of the last epoch: 6 / (1 + 1 + 6).
+    assert rows["sac_lag"] == ["40%", "4.00", "0.5", "0.75"]
+    # old: train/cost_q below 0 in 4 of 5 epochs; no calibration or gradient columns.
+    assert rows["s3rl"] == ["80%", "-", "7e+03", "-"]
+    assert (tmp_path / "report" / "critic_diagnostics.png").stat().st_size > 0
+    # The cost critic's panel (first axis, the only task): the new run's critic solid and the
+    # return dashed; the old run's train/cost_q dotted.
+    styles = {(label, style): ydata for label, style, ydata in drawn["lines"][0]}
+    assert styles[("sac_lag (1 seeds)", "-")] == new["critic/cost_q"]
+    assert [y for (label, s), y in styles.items() if s == "--"] == [new["critic/cost_return"]]
+    assert styles[("s3rl (1 seeds)", ":")] == old["train/cost_q"]
