@@ -38,8 +38,8 @@ class RunLock:
             os.close(fd)
             raise RunInUseError(
                 f"{run_dir} is in use: another process (pid {owner}) is training into it; "
-                "wait for it to end or stop it, or train into another directory. Nothing was "
-                "written."
+                "wait for it to end or stop it, or train into another directory. Its files are "
+                "untouched."
             ) from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())

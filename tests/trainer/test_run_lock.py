@@ -45,7 +45,7 @@ def test_a_killed_owner_leaves_no_stale_lock(tmp_path):
                              stdout=subprocess.PIPE, text=True)
     try:
         assert owner.stdout.readline().strip() == "locked"
-        with pytest.raises(RunInUseError, match=f"pid {owner.pid}.*Nothing was written"):
+        with pytest.raises(RunInUseError, match=f"pid {owner.pid}.*Its files are untouched"):
             RunLock(tmp_path)
     finally:
         owner.send_signal(signal.SIGKILL)
