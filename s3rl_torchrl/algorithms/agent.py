@@ -9,7 +9,7 @@ contrastive phase, which every family takes alike, are added by :func:`build_age
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +32,15 @@ from s3rl_torchrl.objectives import (
     PIDLagrangian,
 )
 
-__all__ = ["Agent", "CompileFn", "Family", "Networks", "build_agent", "build_lagrangian"]
+__all__ = [
+    "Agent",
+    "CompileFn",
+    "Family",
+    "Networks",
+    "actor_critic_adam",
+    "build_agent",
+    "build_lagrangian",
+]
 
 # Every registered task has one cost signal; the losses and the controllers take m >= 1.
 NUM_COSTS = 1
@@ -117,6 +125,30 @@ class Family:
     schedule: type[UpdateSchedule]
     build: Callable[[Any, Networks, CompileFn | None], Agent]
     seeds_in_one_process: bool = False
+
+
+def actor_critic_adam(
+    actor_params: TensorDictBase,
+    critic_params: Sequence[TensorDictBase],
+    actor_lr: float,
+    critic_lr: float,
+    **adam_kwargs,
+) -> dict[str, torch.optim.Optimizer]:
+    """``{"actor", "critic"}``: one Adam over the actor's trainable tensors and one over those of
+    every critic (reward and cost together), as the DDPG and PPO families step them; buffers
+    (e.g. the actor's action bounds) are skipped."""
+    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
+        if not lr > 0:
+            raise ValueError(f"{name} must be > 0, got {lr!r}.")
+
+    def trainable(params: TensorDictBase) -> list[torch.Tensor]:
+        return [p for p in params.values(True, True) if p.requires_grad]
+
+    critic = [p for params in critic_params for p in trainable(params)]
+    return {
+        "actor": torch.optim.Adam(trainable(actor_params), lr=actor_lr, **adam_kwargs),
+        "critic": torch.optim.Adam(critic, lr=critic_lr, **adam_kwargs),
+    }
 
 
 def build_lagrangian(algo: AlgoConfig, cost_limit: float) -> LagrangianController | None:

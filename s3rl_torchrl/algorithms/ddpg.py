@@ -17,10 +17,16 @@ from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDict, TensorDictBase
-from torch import Tensor
 from torchrl.objectives import DDPGLoss
 
-from s3rl_torchrl.algorithms.agent import NUM_COSTS, Agent, CompileFn, Family, Networks
+from s3rl_torchrl.algorithms.agent import (
+    NUM_COSTS,
+    Agent,
+    CompileFn,
+    Family,
+    Networks,
+    actor_critic_adam,
+)
 from s3rl_torchrl.algorithms.config import OffPolicyConfig, check_range
 from s3rl_torchrl.algorithms.schedule import OffPolicySchedule
 from s3rl_torchrl.modules import (
@@ -46,26 +52,16 @@ class DDPGConfig(OffPolicyConfig):
         check_range(f"{path}.exploration_noise", self.exploration_noise, 0.0)
 
 
-def _trainable(params) -> list[Tensor]:  # skip buffers (e.g. the actor's action bounds)
-    return [p for p in params.values(True, True) if p.requires_grad]
-
-
 def make_ddpg_lag_optimizers(
     loss: DDPGLoss, actor_lr: float = 5e-4, critic_lr: float = 1e-3, **adam_kwargs
 ) -> dict[str, torch.optim.Optimizer]:
     """FSRL's Adam optimisers, ``{"actor", "critic"}`` (reward and cost critics together;
     defaults: ``fsrl/config/ddpgl_cfg.py``). Works for ``DDPGLagLoss`` and torchrl's
     ``DDPGLoss``."""
-    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
-        if not lr > 0:
-            raise ValueError(f"{name} must be > 0, got {lr!r}.")
-    critic_params = _trainable(loss.value_network_params)
+    critics = [loss.value_network_params]
     if isinstance(loss, DDPGLagLoss):
-        critic_params += _trainable(loss.cost_value_network_params)
-    return {
-        "actor": torch.optim.Adam(_trainable(loss.actor_network_params), lr=actor_lr, **adam_kwargs),
-        "critic": torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
-    }
+        critics.append(loss.cost_value_network_params)
+    return actor_critic_adam(loss.actor_network_params, critics, actor_lr, critic_lr, **adam_kwargs)
 
 
 def ddpg_lag_update(

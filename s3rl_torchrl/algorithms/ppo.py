@@ -20,10 +20,9 @@ from dataclasses import dataclass
 
 import torch
 from tensordict import TensorDictBase
-from torch import Tensor
 from torchrl.objectives import ClipPPOLoss
 
-from s3rl_torchrl.algorithms.agent import Agent, CompileFn, Family, Networks
+from s3rl_torchrl.algorithms.agent import Agent, CompileFn, Family, Networks, actor_critic_adam
 from s3rl_torchrl.algorithms.config import (
     AlgoConfig,
     check_choice,
@@ -73,10 +72,6 @@ class PPOConfig(AlgoConfig):
         check_choice(f"{path}.cost_surrogate", self.cost_surrogate, COST_SURROGATES)
 
 
-def _trainable(params) -> list[Tensor]:  # skip buffers (e.g. the actor's action bounds)
-    return [p for p in params.values(True, True) if p.requires_grad]
-
-
 def make_ppo_lag_optimizers(
     loss: ClipPPOLoss, actor_lr: float = 5e-4, critic_lr: float = 5e-4, **adam_kwargs
 ) -> dict[str, torch.optim.Optimizer]:
@@ -84,16 +79,10 @@ def make_ppo_lag_optimizers(
     ``{"actor", "critic"}``. FSRL has one Adam over both (``lr = 5e-4``); Adam is
     per-parameter, so two with the same learning rate take the same steps. Works for
     ``PPOLagLoss`` and torchrl's ``ClipPPOLoss``."""
-    for name, lr in (("actor_lr", actor_lr), ("critic_lr", critic_lr)):
-        if not lr > 0:
-            raise ValueError(f"{name} must be > 0, got {lr!r}.")
-    critic_params = _trainable(loss.critic_network_params)
+    critics = [loss.critic_network_params]
     if isinstance(loss, PPOLagLoss):
-        critic_params += _trainable(loss.cost_critic_network_params)
-    return {
-        "actor": torch.optim.Adam(_trainable(loss.actor_network_params), lr=actor_lr, **adam_kwargs),
-        "critic": torch.optim.Adam(critic_params, lr=critic_lr, **adam_kwargs),
-    }
+        critics.append(loss.cost_critic_network_params)
+    return actor_critic_adam(loss.actor_network_params, critics, actor_lr, critic_lr, **adam_kwargs)
 
 
 @torch.no_grad()
