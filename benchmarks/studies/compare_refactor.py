@@ -2,12 +2,12 @@
 one version of the code and then another, compared file by file.
 
     # in a checkout of the code BEFORE the change (PYTHONPATH picks the tree):
-    PYTHONPATH=<before tree> python benchmarks/compare_refactor.py run --out <dir>/before \
+    PYTHONPATH=<before tree> python benchmarks/studies/compare_refactor.py run --out <dir>/before \
         [--critic-eval vmap]
     # in the checkout AFTER the change:
-    PYTHONPATH=<after tree> python benchmarks/compare_refactor.py run --out <dir>/after \
+    PYTHONPATH=<after tree> python benchmarks/studies/compare_refactor.py run --out <dir>/after \
         [--extra diagnostics.probes=true]
-    python benchmarks/compare_refactor.py compare <dir>/before <dir>/after \
+    python benchmarks/studies/compare_refactor.py compare <dir>/before <dir>/after \
         [--out benchmarks/results/<name>.json]
 
 ``run`` trains each of :data:`RUNS` (``s3rl-train`` with ``hydra.run.dir=<out>/<run>``), one
@@ -23,7 +23,7 @@ to every run (e.g. a switch that the other version spells differently).
 ``eval/seconds`` aside) and ``final_eval.json`` (as text) of the two directories against each
 other, for every seed of a ``seeds=[...]`` run, and writes which are byte-identical.
 
-    python benchmarks/compare_refactor.py speed --trees <before tree> <after tree> \
+    python benchmarks/studies/compare_refactor.py speed --trees <before tree> <after tree> \
         [--rounds 2] [--frames 20000] [--out benchmarks/results/<name>.json]
 
 ``speed`` measures ``benchmarks/train_throughput.py``'s quantity, the compiled S3RL recipe at
@@ -45,7 +45,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 from _report import write_report
+
+STUDIES = Path(__file__).resolve().parent
 
 # experiment=tiny sizes (32x32 networks, 2 envs, 100-frame batches, 200-frame epochs) for 2000
 # frames: 10 epochs, ~450 gradient steps. Hopper's young policies do cost (the contrastive phase
@@ -80,7 +83,7 @@ COMPARED_FILES = ("metrics.csv", "final_eval.json")
 # critic evaluation (a keyword of the loss in the versions that had several).
 CHILD = """
 import functools, sys
-critic_eval, argv = sys.argv[1], sys.argv[2:]
+studies, critic_eval, argv = sys.argv[1], sys.argv[2], sys.argv[3:]
 if critic_eval:
     from s3rl_torchrl.objectives import sac_lag
     init = sac_lag.SACLagLoss.__init__
@@ -92,30 +95,10 @@ if critic_eval:
 
     sac_lag.SACLagLoss.__init__ = forced
 
-    from s3rl_torchrl.objectives import stacked
-    template_loss = stacked._template_loss
+    sys.path.insert(0, studies)
+    from _before_issue37 import give_template_batch_sizes, stacked_module
 
-    def template_with_batch_sizes(loss):
-        template = template_loss(loss)
-        cls = type(template)
-        for name in stacked.PER_AGENT:
-            size = getattr(getattr(loss, name, None), "batch_size", None)
-            if size is None:
-                continue
-            for attribute, detach in ((name, False), ("_cached_detached_" + name.replace("_network_params", "_params"), True)):
-                if detach and not hasattr(cls, attribute):
-                    continue
-
-                def read(self, name=name, size=size, detach=detach):
-                    params = self._current.params.get(name)
-                    params = params.detach() if detach else params
-                    params.batch_size = size
-                    return params
-
-                setattr(cls, attribute, property(read))
-        return template
-
-    stacked._template_loss = template_with_batch_sizes
+    give_template_batch_sizes(stacked_module())
 from s3rl_torchrl.recipes.train import main
 sys.argv = ["s3rl-train", *argv]
 main()
@@ -134,7 +117,7 @@ def run(out: Path, critic_eval: str | None, extra: list[str], only: list[str] | 
         argv = [*TINY, *overrides, *extra, f"hydra.run.dir={run_dir}"]
         start = time.perf_counter()
         subprocess.run(
-            [sys.executable, "-c", CHILD, critic_eval or "", *argv],
+            [sys.executable, "-c", CHILD, str(STUDIES), critic_eval or "", *argv],
             check=True,
             env={**os.environ, "PYTHONHASHSEED": "0"},
             # Not in a checkout: `python -c` puts the working directory first on sys.path, where
@@ -185,7 +168,7 @@ print(json.dumps({"frames_measured": f1 - f0, "wall_seconds_without_eval": round
 
 
 def speed(trees: list[Path], rounds: int, frames: int, task: str, out: Path | None) -> None:
-    bench = str(Path(__file__).resolve().parent)
+    bench = str(_paths.BENCHMARKS)
     rows = []
     for round_index in range(rounds):
         for tree in trees:

@@ -1,14 +1,14 @@
 """Did ``SACLagLoss``'s faster critic evaluations pay for several seeds in one step? The
 ``StackedSACLag`` step of K agents with ``critic_eval="batched_mlp"`` against ``"vmap"``.
 
-    PYTHONPATH=<checkout of 8e0ee0c> python benchmarks/critic_eval_stacked.py \
+    PYTHONPATH=<checkout of 8e0ee0c> python benchmarks/studies/critic_eval_stacked.py \
         [--agents 5] [--compiled] [--out benchmarks/results/critic_eval_stacked.json]
 
 It measures the version of the code that still had ``critic_eval`` (up to commit 8e0ee0c;
 issue 37 kept ``"vmap"`` alone, docs/objectives.md "How it is shaped"). That version's
 ``StackedSACLag`` ran ``"vmap"`` only after its template loss gave each critic tensordict its
 batch size back inside the ``vmap`` over agents (what the later version does); the script
-patches that in. HalfCheetah sizes (17/6), 128x128 networks, batch 256, one cost, lambda 0.3;
+patches that in (``_before_issue37.py``). HalfCheetah sizes (17/6), 128x128 networks, batch 256, one cost, lambda 0.3;
 both variants in one process, interleaved rounds of 10 steps, process CPU time, one thread.
 """
 
@@ -19,44 +19,18 @@ import statistics
 import time
 from pathlib import Path
 
+import _paths  # noqa: F401  (benchmarks/ on sys.path)
 import torch
+from _before_issue37 import give_template_batch_sizes, stacked_module
 from _report import interleaved_rounds, write_report
 from tensordict import TensorDict
 from torchrl.data import Bounded
 
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network, build_s3rl_actor
 from s3rl_torchrl.objectives import SACLagLoss
-from s3rl_torchrl.objectives import stacked as stacked_module
 from s3rl_torchrl.trainer import compile_loss
 
 OBS, ACT, BATCH = 17, 6, 256
-
-
-def template_with_batch_sizes(template_loss):
-    """``_template_loss`` whose per-agent tensordicts keep their batch size inside ``vmap``."""
-
-    def patched(loss):
-        template = template_loss(loss)
-        cls = type(template)
-        for name in stacked_module.PER_AGENT:
-            size = getattr(getattr(loss, name, None), "batch_size", None)
-            if size is None:
-                continue
-            cached = "_cached_detached_" + name.replace("_network_params", "_params")
-            for attribute, detach in ((name, False), (cached, True)):
-                if detach and not hasattr(cls, attribute):
-                    continue
-
-                def read(self, name=name, size=size, detach=detach):
-                    params = self._current.params.get(name)
-                    params = params.detach() if detach else params
-                    params.batch_size = size
-                    return params
-
-                setattr(cls, attribute, property(read))
-        return template
-
-    return patched
 
 
 def make_loss(critic_eval: str, seed: int) -> SACLagLoss:
@@ -107,10 +81,11 @@ def main() -> None:
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    stacked_module._template_loss = template_with_batch_sizes(stacked_module._template_loss)
+    stacked = stacked_module()
+    give_template_batch_sizes(stacked)
     cases, compile_seconds = {}, {}
     for critic_eval in ("batched_mlp", "vmap"):
-        group = stacked_module.StackedSACLag(
+        group = stacked.StackedSACLag(
             [make_loss(critic_eval, seed) for seed in range(args.agents)],
             5e-4,
             1e-3,
@@ -120,7 +95,7 @@ def main() -> None:
         )
         data = batches(args.agents)
         noise = torch.stack(
-            [stacked_module.draw_noise(BATCH, ACT) for _ in range(args.agents)]
+            [stacked.draw_noise(BATCH, ACT) for _ in range(args.agents)]
         )
 
         def step(group=group, data=data, noise=noise):
