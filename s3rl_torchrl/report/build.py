@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from s3rl_torchrl.report.paper import PAPER_TITLE, paper_results_for
+from s3rl_torchrl.report.peers import peer_results_for
 from s3rl_torchrl.report.runs import (
     PROTOCOLS,
     RUN_SPECIFIC_KEYS,
@@ -189,6 +190,49 @@ def _paper(value, digits: int = 2) -> str:
     if value is None:
         return "–"
     return f"{value.mean:.{digits}f} ± {value.std:.{digits}f}"
+
+
+def _frames(frames: int) -> str:
+    if frames <= 0:
+        return "–"
+    return f"{frames / 1e6:g}M" if frames >= 1_000_000 else f"{frames // 1000}k"
+
+
+def _peer_value(mean: float, std: float, approximate: bool) -> str:
+    if math.isnan(mean):
+        return "–"
+    text = f"~{mean:g}" if approximate else f"{mean:.2f}"
+    return text if math.isnan(std) else f"{text} ± {std:.2f}"
+
+
+def _peer_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
+    """Per task with published peer results: our finished groups (pooled episodes, as the
+    paper comparison) and then the peers' rows, each with its frames and cost limit."""
+    rows = []
+    for task, groups in by_task.items():
+        peers = peer_results_for(task)
+        if not peers:
+            continue
+        for group in groups:
+            if not group.finished or group.extra:
+                continue
+            frames = group.runs[0].config.get("collector", {}).get("total_frames", 0)
+            for protocol, read in _protocol_groups(group):
+                s = summarize(read)
+                rows.append([task, "ours", f"{group.label} ({protocol})", _frames(frames),
+                             _num(group.cost_limit, 0), _ms(s.reward_episodes),
+                             _ms(s.cost_episodes)])
+        for peer in peers:
+            cost = _peer_value(peer.cost, peer.cost_std, peer.approximate)
+            if math.isnan(peer.cost):
+                cost = f"≤ {peer.cost_limit:g}"
+            rows.append([task, peer.source, peer.method, _frames(peer.frames),
+                         "–" if math.isnan(peer.cost_limit) else f"{peer.cost_limit:g}",
+                         _peer_value(peer.reward, peer.reward_std, peer.approximate), cost])
+    if not rows:
+        return ["No peer has published results on these tasks (`report/data/peer_results.csv`)."]
+    header = ["task", "who", "what", "frames", "cost limit", "reward", "cost"]
+    return _table(header, rows, "llllrrr")
 
 
 def _occupancy(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
@@ -488,6 +532,18 @@ def build_report(
         "(`experiment=paper`).",
         "",
         *_paper_comparison(by_task),
+        "",
+        "## Beside other libraries' published results",
+        "",
+        "What OmniSafe's off-policy benchmark (Table 2: 10 evaluation episodes over several "
+        "seeds, mean ± std), FSRL's benchmark (final training reward and cost of 3 seeds, "
+        "read off its curves: ~) and DSRL's dataset (the best reward of any trajectory within "
+        "cost 10: what a feasible policy can earn) report on these tasks, beside ours (pooled "
+        "episodes, last policy and best-feasible checkpoint). Other code at other frames and "
+        "cost limits: for orientation, not a test. Sources: "
+        "`s3rl_torchrl/report/data/peer_results.csv`.",
+        "",
+        *_peer_comparison(by_task),
         "",
     ]
 
