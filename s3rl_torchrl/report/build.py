@@ -219,7 +219,7 @@ def _peer_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
             frames = group.runs[0].config.get("collector", {}).get("total_frames", 0)
             for protocol, read in _protocol_groups(group):
                 s = summarize(read)
-                rows.append([task, "ours", f"{group.label} ({protocol})", _frames(frames),
+                rows.append([task, "ours", f"{group.label}, {protocol}", _frames(frames),
                              _num(group.cost_limit, 0), _ms(s.reward_episodes),
                              _ms(s.cost_episodes)])
         for peer in peers:

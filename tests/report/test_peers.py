@@ -57,7 +57,7 @@ def test_report_puts_ours_beside_the_peers(tmp_path, make_run):
     section = text.split("## Beside other libraries' published results", 1)[1].split("\n## ")[0]
     rows = [line for line in section.splitlines() if line.startswith("| SafetyBallRun-v0 |")]
     pooled = np.array(episodes["rewards"] * 2)
-    assert rows[0] == (f"| SafetyBallRun-v0 | ours | s3rl (last policy) | 1M | 10 | "
+    assert rows[0] == (f"| SafetyBallRun-v0 | ours | s3rl, last policy | 1M | 10 | "
                        f"{pooled.mean():.2f} ± {pooled.std():.2f} | 3.00 ± 2.24 |")
     assert "| SafetyBallRun-v0 | FSRL | SAC-Lag | 500k | 10 | ~390 | ~32 |" in rows
     assert "| SafetyBallRun-v0 | DSRL | best trajectory within the limit | – | 10 | ~440 | ≤ 10 |" in (
