@@ -9,8 +9,9 @@ command never stopped.
 They were made on one machine, and float rounding differs between CPUs: on an AMD EPYC machine
 of this kind the resumed runs differ from them by up to 1.2e-5 relative (PPO-Lag's
 ``train/loss_objective``; S3RL 1.6e-6, DDPG-Lag 1.6e-7) although every resume is exact there. So
-the numbers are compared within :data:`REL`; that a resume continues a run bit for bit is
-checked on one machine, old checkpoint against new, by ``tests/trainer/test_resume.py``."""
+the numbers are compared within :data:`REL`. That a resume continues a run bit for bit is
+checked where both runs are made on one machine, a resumed run against the same run never
+stopped, by ``tests/trainer/test_resume.py``."""
 
 from __future__ import annotations
 
