@@ -1,0 +1,77 @@
+"""The committed multiruns (configs/sweep/*.yaml): every job they launch is a valid config, and no
+two jobs of one sweep share a run directory (a 1M-frame run is ~30 minutes; a bad override or a
+shared directory should fail here, not after the first job has trained)."""
+
+from __future__ import annotations
+
+import functools
+import itertools
+
+import pytest
+import yaml
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from omegaconf import OmegaConf, open_dict
+
+from s3rl_torchrl.recipes import config_dir
+from s3rl_torchrl.trainer import validate
+
+SWEEPS = sorted(p.stem for p in (config_dir() / "sweep").glob("*.yaml"))
+
+
+def sweep_jobs(name: str) -> list[list[str]]:
+    """Each job's overrides, expanded the way Hydra's basic sweeper expands ``params``."""
+    params = yaml.safe_load((config_dir() / "sweep" / f"{name}.yaml").read_text())
+    params = params["hydra"]["sweeper"]["params"]
+    parser = OverridesParser.create()
+    choices = []
+    for override in parser.parse_overrides([f"{key}={value}" for key, value in params.items()]):
+        key = override.get_key_element()
+        if override.is_sweep_override():
+            choices.append([f"{key}={v}" for v in override.sweep_string_iterator()])
+        else:
+            choices.append([f"{key}={override.get_value_element_as_str()}"])
+    return [[f"+sweep={name}", *job] for job in itertools.product(*choices)]
+
+
+def test_every_sweep_is_listed():
+    assert {"evidence", "table1", "critic_selection_goal4", "critic_selection_goal5"} <= set(SWEEPS)
+
+
+@functools.cache
+def validated_job_directories(name: str) -> tuple[str, ...]:
+    """Compose and validate every job of the sweep; its run directories, in launch order."""
+    from hydra import compose, initialize_config_dir
+
+    from s3rl_torchrl.trainer import register_configs
+
+    register_configs()
+    directories = []
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        for overrides in sweep_jobs(name):
+            cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
+            # hydra.runtime.choices is filled in by a launch, not by compose: fill the one
+            # choice a subdir names (the critic) from the job's overrides.
+            choices = dict(o.split("=", 1) for o in overrides if "." not in o.split("=")[0])
+            OmegaConf.update(cfg, "hydra.runtime.choices", {"critic": choices.get("critic", "")},
+                             force_add=True)
+            directories.append(f"{cfg.hydra.sweep.dir}/{cfg.hydra.sweep.subdir}")
+            with open_dict(cfg):
+                del cfg["hydra"]
+            validate(cfg)
+    return tuple(directories)
+
+
+@pytest.mark.parametrize("name", SWEEPS)
+def test_every_job_of_a_sweep_validates_in_its_own_directory(name):
+    directories = validated_job_directories(name)
+    assert directories
+    shared = {d for d in directories if directories.count(d) > 1}
+    assert not shared, f"{name}: several jobs write into {sorted(shared)}"
+
+
+def test_no_two_sweeps_write_into_the_same_directory():
+    owner = {}
+    for name in SWEEPS:
+        for directory in validated_job_directories(name):
+            assert directory not in owner, f"{name} and {owner[directory]} both write {directory}"
+            owner[directory] = name
