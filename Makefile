@@ -87,6 +87,11 @@ report: $(STAMP)
 		--reference sac_lag --out docs/critic_selection $(SELECTION_GROUPS)
 	$(BIN)/s3rl-report lagrangian benchmarks/results/critic_selection/*/*/seed* \
 		--out docs/critic_selection/lagrangian.json --plot docs/critic_selection/lagrangian.png
+	$(BIN)/s3rl-report benchmarks/results/critic_selection_1m --no-embeddings --no-aggregate \
+		--reference sac_lag --out docs/critic_selection_1m \
+		--group-by algo.cost_critic_read --group-by algo.actor_lr
+	$(BIN)/s3rl-report lagrangian benchmarks/results/critic_selection_1m/*/*/seed* \
+		--out docs/critic_selection_1m/lagrangian.json --plot docs/critic_selection_1m/lagrangian.png
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache
