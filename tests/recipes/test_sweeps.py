@@ -1,6 +1,6 @@
 """The committed multiruns (configs/sweep/*.yaml): every job they launch is a valid config, and no
-two jobs of one sweep share a run directory (a 1M-frame run is ~30 minutes; a bad override or a
-shared directory should fail here, not after the first job has trained)."""
+two jobs, of one sweep or of two, share a run directory (a 1M-frame run is ~30 minutes; a bad
+override or a shared directory should fail here, not after the first jobs have trained)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,8 @@ def sweep_jobs(name: str) -> list[list[str]]:
     return [[f"+sweep={name}", *job] for job in itertools.product(*choices)]
 
 
-def test_every_sweep_is_listed():
+def test_the_committed_sweeps_are_found():
+    # An empty glob would parametrise nothing and pass silently.
     assert {"evidence", "table1", "critic_selection_goal4", "critic_selection_goal5"} <= set(SWEEPS)
 
 
