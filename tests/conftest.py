@@ -14,8 +14,9 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
 
 # Small fixtures that shrink experiments to seconds (BenchMARL style), for every area's tests.
-def compose_train(*overrides: str):
-    """The Hydra config ``s3rl-train`` would get with these overrides (not validated)."""
+def compose_train(*overrides: str, return_hydra_config: bool = False):
+    """The Hydra config ``s3rl-train`` would get with these overrides (not validated); with
+    ``return_hydra_config``, its ``hydra`` node too (the sweep's directories)."""
     from hydra import compose, initialize_config_dir
 
     from s3rl_torchrl.recipes import config_dir
@@ -23,7 +24,9 @@ def compose_train(*overrides: str):
 
     register_configs()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
-        return compose(config_name="train", overrides=list(overrides))
+        return compose(
+            config_name="train", overrides=list(overrides), return_hydra_config=return_hydra_config
+        )
 
 
 @pytest.fixture

@@ -14,6 +14,7 @@ from omegaconf import OmegaConf, open_dict
 
 from s3rl_torchrl.recipes import config_dir
 from s3rl_torchrl.trainer import validate
+from tests.conftest import compose_train
 
 SWEEPS = sorted(p.stem for p in (config_dir() / "sweep").glob("*.yaml"))
 
@@ -41,24 +42,18 @@ def test_the_committed_sweeps_are_found():
 @functools.cache
 def validated_job_directories(name: str) -> tuple[str, ...]:
     """Compose and validate every job of the sweep; its run directories, in launch order."""
-    from hydra import compose, initialize_config_dir
-
-    from s3rl_torchrl.trainer import register_configs
-
-    register_configs()
     directories = []
-    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
-        for overrides in sweep_jobs(name):
-            cfg = compose(config_name="train", overrides=overrides, return_hydra_config=True)
-            # hydra.runtime.choices is filled in by a launch, not by compose: fill the one
-            # choice a subdir names (the critic) from the job's overrides.
-            choices = dict(o.split("=", 1) for o in overrides if "." not in o.split("=")[0])
-            OmegaConf.update(cfg, "hydra.runtime.choices", {"critic": choices.get("critic", "")},
-                             force_add=True)
-            directories.append(f"{cfg.hydra.sweep.dir}/{cfg.hydra.sweep.subdir}")
-            with open_dict(cfg):
-                del cfg["hydra"]
-            validate(cfg)
+    for overrides in sweep_jobs(name):
+        cfg = compose_train(*overrides, return_hydra_config=True)
+        # hydra.runtime.choices is filled in by a launch, not by compose: fill the one
+        # choice a subdir names (the critic) from the job's overrides.
+        choices = dict(o.split("=", 1) for o in overrides if "." not in o.split("=")[0])
+        OmegaConf.update(cfg, "hydra.runtime.choices", {"critic": choices.get("critic", "")},
+                         force_add=True)
+        directories.append(f"{cfg.hydra.sweep.dir}/{cfg.hydra.sweep.subdir}")
+        with open_dict(cfg):
+            del cfg["hydra"]
+        validate(cfg)
     return tuple(directories)
 
 
