@@ -48,9 +48,20 @@ TENSORDICT_COMPILED_LOCK = r"Using lock_\(\) inside a compiled graph"
 MUJOCO_SETTOTALMASS = "compiler attribute 'settotalmass' is deprecated"
 
 
+_quieted = False
+
+
 def quiet_known_warnings() -> None:
     """Silence exactly the third-party warnings above; every other warning is shown as before
-    (MuJoCo's on stderr, with its ``WARNING:`` prefix)."""
+    (MuJoCo's on stderr, with its ``WARNING:`` prefix).
+
+    Warning filters and MuJoCo's handler belong to one process, so each recipe calls this in
+    its Hydra task function: a launcher (joblib, submitit) runs that function in a process of
+    its own. Calling it again in the same process changes nothing."""
+    global _quieted
+    if _quieted:
+        return
+    _quieted = True
     import mujoco
 
     warnings.filterwarnings(

@@ -81,6 +81,7 @@ def reject(err: Exception | str, output: HydraOutput) -> NoReturn:
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="evaluate")
 def _main(cfg: DictConfig) -> float:
+    quiet_known_warnings()  # here, not in main(): a launcher runs each job in its own process
     output = HydraOutput.current()  # before anything writes into the output directory
     if OmegaConf.is_missing(cfg, "checkpoint"):
         reject(MISSING_CHECKPOINT, output)
@@ -125,7 +126,6 @@ def _main(cfg: DictConfig) -> float:
 
 
 def main() -> None:
-    quiet_known_warnings()
     _main()
 
 

@@ -88,6 +88,7 @@ def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:
 
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train")
 def _main(cfg: DictConfig) -> float:
+    quiet_known_warnings()  # here, not in main(): a launcher runs each job in its own process
     output = HydraOutput.current()  # before anything writes into the run directory
     # resume=auto: this command's run directory (a fixed hydra.run.dir, or a sweep's job
     # directory) is continued if it holds a run, started otherwise; the composed config must
@@ -131,7 +132,6 @@ def _main(cfg: DictConfig) -> float:
 
 
 def main() -> None:
-    quiet_known_warnings()
     _main()
 
 
