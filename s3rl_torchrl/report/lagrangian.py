@@ -72,6 +72,10 @@ METRICS = (
     "train_cost_autocorr",
     "eval_reward_last20",
     "eval_cost_last20",
+    "train_cost_last20",
+    "lambda_peak",
+    "lambda_peak_frames",
+    "lambda_end",
     "final_reward",
     "final_cost",
 )
@@ -196,6 +200,10 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         return sum(v > limit for v in values) / len(values) if values else math.nan
 
     lams = col["lagrangian"]
+    lambda_peak, peak_frames = max(
+        ((_float(r.get("lagrangian")), f) for r, f in zip(rows, frames)),
+        key=lambda pair: -math.inf if math.isnan(pair[0]) else pair[0],
+    )
     updates = [lam for f, lam in lambda_updates(run_dir) if half < f <= frames[-1]]
     summary = {
         "run_dir": str(run_dir),
@@ -219,6 +227,12 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "train_cost_autocorr": lag1_autocorrelation(col["train/cost"]),
         "eval_reward_last20": _mean([_float(r.get("eval/reward")) for r in last20]),
         "eval_cost_last20": _mean([_float(r.get("eval/cost")) for r in last20]),
+        "train_cost_last20": _mean([_float(r.get("train/cost")) for r in last20]),
+        # Over the whole run, not its second half: how high the multiplier went, when, and
+        # where it ended (docs/results.md's per-task tables).
+        "lambda_peak": lambda_peak,
+        "lambda_peak_frames": int(peak_frames),
+        "lambda_end": _float(rows[-1].get("lagrangian")),
         "final_reward": math.nan,
         "final_cost": math.nan,
     }

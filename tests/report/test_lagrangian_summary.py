@@ -82,6 +82,9 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert (s["final_reward"], s["final_cost"]) == (2500.0, 3.0)
     # The last 20% of 6 epochs: round(1.2) = 1 epoch, the last.
     assert (s["eval_reward_last20"], s["eval_cost_last20"]) == (1000.0, 5.0)
+    assert s["train_cost_last20"] == 0.0
+    # The multiplier over the whole run: highest 100 at 80000 frames, 2 at the end.
+    assert (s["lambda_peak"], s["lambda_peak_frames"], s["lambda_end"]) == (100.0, 80000, 2.0)
 
     # A second seed of the same setting: every late eval cost over the limit, no final eval.
     rows_b = [[r[0], r[1], r[2], r[3], r[4] * 2, r[5], 50.0] for r in rows]
@@ -94,6 +97,7 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert row["mean_abs_dlambda_epoch"] == pytest.approx((50.5 + 101) / 2)
     assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
     assert row["eval_cost_last20"] == pytest.approx((5.0 + 50.0) / 2)
+    assert (row["lambda_peak"], row["lambda_end"]) == (150.0, 3.0)  # seed 20's are twice seed 10's
     line = ld.markdown(report["settings"]).splitlines()[-1]
     assert line.endswith("| 1000 | 27.5 | 2500 | 3.0 |")  # one final evaluation: no std
     saved = json.loads((tmp_path / "s.json").read_text())
