@@ -283,6 +283,12 @@ class ReplayUpdates:
         held = TensorDict(state["nstep_held"], batch_size=state["nstep_held_shape"])
         self.nstep.load_held_frames(held)
 
+    def end_episodes(self) -> None:
+        """The envs restart their episodes before the next batch: the n-step windows held back
+        for it end where those episodes were cut (:meth:`NStepTransform.end_held_episodes`)."""
+        if self.nstep is not None:
+            self.nstep.end_held_episodes()
+
 
 class RolloutUpdates:
     """On-policy at run time: each batch gets its advantages (``prepare``: GAE of the reward,
@@ -331,3 +337,6 @@ class RolloutUpdates:
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         pass
+
+    def end_episodes(self) -> None:
+        """Nothing carries over: each batch's advantages are computed within the batch."""

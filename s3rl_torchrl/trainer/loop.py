@@ -676,6 +676,9 @@ class Trainer:
                 "the checkpoint was written before checkpoints kept the envs' state"
             )
             self.inexact_resume = reason
+            # The n-step windows held back from the last batch would run into the restarted
+            # episodes' first steps: they end where their episodes were cut.
+            self.updates.end_episodes()
             print(
                 f"Resuming {self.run_dir} inexactly: {reason}; every training episode restarts "
                 "here, so the rest of the run differs from an uninterrupted one."

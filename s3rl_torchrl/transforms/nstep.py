@@ -228,6 +228,20 @@ class NStepTransform(MultiStepTransform):
         """Restore :attr:`held_frames` (from a checkpoint)."""
         self._buffer = None if frames is None else frames.clone()
 
+    def end_held_episodes(self) -> None:
+        """End every held episode at its last held step, as a time limit ends one
+        (``("next", "done")`` and ``("next", "truncated")`` set, ``terminated`` untouched):
+        for envs that restart their episodes before the next batch, e.g. a resume that could not
+        restore them. The held steps' windows then stop there and bootstrap from the last
+        observation, instead of running into another episode's steps."""
+        if self._buffer is None:
+            return
+        last = (slice(None),) * (self._buffer.ndim - 1) + (-1,)
+        for key in (("next", "done"), ("next", "truncated")):
+            flags = self._buffer.get(key, None)
+            if flags is not None:
+                flags[last] = True
+
 
 def _check_consecutive(frames: TensorDictBase) -> None:
     """Refuse frames whose time dimension is not one env copy's consecutive steps, e.g. a

@@ -160,3 +160,31 @@ def test_kill_9_after_a_checkpoint_then_resume_alone_is_the_uninterrupted_run(tm
     assert done.returncode == 0, done.stderr
     assert rows(part) == rows(full)
     assert final(part) == final(full)
+
+
+@pytest.mark.slow
+def test_an_inexact_resume_in_the_middle_of_episodes_cuts_them(tiny_config, tmp_path):
+    # A checkpoint whose env copies are mid-episode (50 of BallRun's 100 steps per copy), with
+    # n-step windows held back: the resumed envs restart their episodes, so the held frames'
+    # episodes end there as a time limit would end them (the first CarRun evidence run resumed
+    # this way stopped with "step_count jumps without an episode end").
+    pytest.importorskip("bullet_safety_gym")
+    cfg = tiny_config(
+        "task=SafetyBallRun-v0", "algo=sac_lag", "algo.n_step=3", "collector.total_frames=400",
+        "collector.frames_per_epoch=100",
+    )
+
+    def stop(trainer, row):
+        trainer.stop.requested = True
+
+    part = train(cfg, tmp_path, on_epoch_end=stop)
+    assert part.status == "interrupted" and part.counters.frames == 100
+    cfg.resume = str(tmp_path)
+    trainer = Trainer(cfg, tmp_path / "unused")
+    held = trainer.updates.nstep.held_frames
+    assert held["step_count"][..., -1, 0].tolist() == [49, 49]  # mid-episode on both copies
+    assert held["next", "done"][..., -1, 0].tolist() == [True, True]
+    assert held["next", "truncated"][..., -1, 0].tolist() == [True, True]
+    assert not held["next", "terminated"].any()
+    assert not held["next", "done"][..., :-1, :].any()  # only the last held step ends one
+    assert trainer.run().status == "finished"

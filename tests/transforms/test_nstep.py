@@ -184,3 +184,34 @@ def test_missing_reward_key_is_named():
     del data["next", "cost"]
     with pytest.raises(KeyError, match="cost"):
         nstep_transition(data, 2, GAMMA)
+
+
+def test_ending_the_held_episodes_cuts_their_windows_by_hand():
+    # An episode cut after step 5 (e.g. a resume that restarts the envs): the next batch is a
+    # new episode whose step_count starts again at 0.
+    def counted(T):
+        data = trajectory(T, terminated_at=(), truncated_at=())
+        data["step_count"] = torch.arange(T)[:, None]
+        return data
+
+    as_it_was = ReplayBuffer(storage=LazyTensorStorage(50), transform=make_nstep_transform(2, GAMMA))
+    as_it_was.extend(counted(6))
+    with pytest.raises(ValueError, match="step_count jumps without an episode end"):
+        as_it_was.extend(counted(4))  # the held windows would run into the new episode
+
+    transform = make_nstep_transform(2, GAMMA)
+    rb = ReplayBuffer(storage=LazyTensorStorage(50), transform=transform)
+    rb.extend(counted(6))  # stores steps 0-3, holds 4 and 5
+    transform.end_held_episodes()
+    assert transform.held_frames["next", "truncated"].squeeze(-1).tolist() == [False, True]
+    rb.extend(counted(4))
+    stored = rb[:]
+    # Steps 4 and 5 of the cut episode, then steps 0 and 1 of the new one (2 and 3 held).
+    assert stored["observation"].squeeze(-1).tolist() == [0, 1, 2, 3, 4, 5, 0, 1]
+    assert stored["next", "reward"].squeeze(-1).tolist()[4:6] == [5 + 6 / 2, 6]
+    assert stored["steps_to_next_obs"].tolist()[4:6] == [2, 1]
+    assert stored["next", "observation"].squeeze(-1).tolist()[4:6] == [106, 106]
+    assert stored["next", "truncated"].squeeze(-1).tolist()[4:6] == [True, True]
+    assert not stored["next", "terminated"].any()  # a cut, not a termination: bootstrapped
+    transform.end_held_episodes()  # nothing held yet: a no-op, not an error
+    assert make_nstep_transform(2, GAMMA).end_held_episodes() is None
