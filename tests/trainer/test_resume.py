@@ -166,8 +166,8 @@ def test_kill_9_after_a_checkpoint_then_resume_alone_is_the_uninterrupted_run(tm
 def test_an_inexact_resume_in_the_middle_of_episodes_cuts_them(tiny_config, tmp_path):
     # A checkpoint whose env copies are mid-episode (50 of BallRun's 100 steps per copy), with
     # n-step windows held back: the resumed envs restart their episodes, so the held frames'
-    # episodes end there as a time limit would end them (the first CarRun evidence run resumed
-    # this way stopped with "step_count jumps without an episode end").
+    # episodes end there as a time limit would end them (a CarRun evidence run resumed this way
+    # stopped with "step_count jumps without an episode end").
     pytest.importorskip("bullet_safety_gym")
     cfg = tiny_config(
         "task=SafetyBallRun-v0", "algo=sac_lag", "algo.n_step=3", "collector.total_frames=400",

@@ -213,5 +213,7 @@ def test_ending_the_held_episodes_cuts_their_windows_by_hand():
     assert stored["next", "observation"].squeeze(-1).tolist()[4:6] == [106, 106]
     assert stored["next", "truncated"].squeeze(-1).tolist()[4:6] == [True, True]
     assert not stored["next", "terminated"].any()  # a cut, not a termination: bootstrapped
-    transform.end_held_episodes()  # nothing held yet: a no-op, not an error
-    assert make_nstep_transform(2, GAMMA).end_held_episodes() is None
+    # Before the first batch nothing is held: a no-op, not an error.
+    fresh = make_nstep_transform(2, GAMMA)
+    fresh.end_held_episodes()
+    assert fresh.held_frames is None
