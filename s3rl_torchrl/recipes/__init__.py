@@ -11,6 +11,7 @@ command prints into Hydra's job log (``train.log``, ``evaluate.log``).
 
 from __future__ import annotations
 
+import functools
 import logging
 import sys
 import time
@@ -48,9 +49,7 @@ TENSORDICT_COMPILED_LOCK = r"Using lock_\(\) inside a compiled graph"
 MUJOCO_SETTOTALMASS = "compiler attribute 'settotalmass' is deprecated"
 
 
-_quieted = False
-
-
+@functools.cache  # once per process: a second call would wrap MuJoCo's handler again
 def quiet_known_warnings() -> None:
     """Silence exactly the third-party warnings above; every other warning is shown as before
     (MuJoCo's on stderr, with its ``WARNING:`` prefix).
@@ -58,10 +57,6 @@ def quiet_known_warnings() -> None:
     Warning filters and MuJoCo's handler belong to one process, so each recipe calls this in
     its Hydra task function: a launcher (joblib, submitit) runs that function in a process of
     its own. Calling it again in the same process changes nothing."""
-    global _quieted
-    if _quieted:
-        return
-    _quieted = True
     import mujoco
 
     warnings.filterwarnings(
