@@ -58,8 +58,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             "metrics."
         ),
     )
-    parser.add_argument("runs", help="a run, a Hydra multirun/sweep dir or an outputs dir")
-    parser.add_argument("--out", default=None, help="report directory (default: RUNS/report)")
+    parser.add_argument("runs", nargs="+",
+                        help="a run, a Hydra multirun/sweep dir or an outputs dir; several "
+                             "are reported as one (e.g. two exported results trees)")
+    parser.add_argument("--out", default=None,
+                        help="report directory (default: RUNS/report, the first RUNS')")
     parser.add_argument("--reference", default="s3rl",
                         help="the algo compared with every other one (default: s3rl)")
     parser.add_argument("--compare", action="append", default=[], metavar="A:B",
@@ -172,6 +175,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from s3rl_torchrl.report.build import build_report, export_embedding_panels
 
     if args.export_runs is not None:
+        if len(args.runs) > 1:
+            print("s3rl-report: error: --export-runs copies one RUNS directory (its layout "
+                  f"below DEST mirrors it); got {len(args.runs)}: {' '.join(args.runs)}.",
+                  file=sys.stderr)
+            return 2
+        args.runs = args.runs[0]
         try:
             export = export_runs(args.runs, args.export_runs)
             panels = [] if args.no_embeddings else export_embedding_panels(

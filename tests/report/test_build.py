@@ -148,6 +148,40 @@ def test_export_runs_copies_the_results_only_and_rebuilds_the_same_table(tmp_pat
                  "--no-embeddings"]) == 2
 
 
+def test_several_roots_make_one_report_that_names_the_paper_tasks_left_out(
+    tmp_path, make_run, capsys
+):
+    """Two results trees (the evidence tasks and the other Table 1 tasks) in one report: the
+    tables of both, and the paper's Table 1 tasks that neither has."""
+    _sweep(tmp_path, make_run)  # HalfCheetah, both algos, below sweep/
+    for algo in ("s3rl", "sac_lag"):
+        for seed in (1, 2):
+            make_run(tmp_path / "other" / f"{algo}_seed{seed}", "SafetyBallRun-v0", algo, seed)
+    # A task of only one algo is not covered.
+    make_run(tmp_path / "other" / "s3rl_ant", "SafetyAntRun-v0", "s3rl", 1)
+
+    text = build_report([tmp_path / "sweep", tmp_path / "other"], tmp_path / "both",
+                        embeddings=False, aggregate=False).path.read_text()
+    assert f"| {TASK} | s3rl | 3 |" in text and "| SafetyBallRun-v0 | s3rl | 2 |" in text
+    assert f"below `{tmp_path / 'sweep'}`, `{tmp_path / 'other'}` (" in text
+    coverage = next(line for line in text.splitlines() if line.startswith("The paper's Table 1"))
+    assert "has 16 tasks; 2 of them have finished runs of s3rl and another algo here" in coverage
+    left_out = coverage.split("Not (yet) here: ")[1].rstrip(".").split(", ")
+    assert len(left_out) == 14 and "SafetyAntRun-v0" in left_out
+    assert "SafetyBallRun-v0" not in left_out and "SafetyHalfCheetahVelocityGymnasium-v1" not in (
+        left_out)
+
+    # The same seed of a group below both roots is reported once or not at all.
+    make_run(tmp_path / "again" / "s3rl_seed1", "SafetyBallRun-v0", "s3rl", 1)
+    assert main([str(tmp_path / "other"), str(tmp_path / "again"), "--no-embeddings"]) == 2
+    assert "Seed 1 of task=SafetyBallRun-v0 algo=s3rl appears twice" in capsys.readouterr().err
+    # An export mirrors one tree.
+    assert main([str(tmp_path / "sweep"), str(tmp_path / "other"), "--export-runs",
+                 str(tmp_path / "kept")]) == 2
+    assert "--export-runs copies one RUNS directory" in capsys.readouterr().err
+    assert not (tmp_path / "kept").exists()
+
+
 def test_export_again_removes_what_the_runs_no_longer_have(
     tmp_path, make_run, monkeypatch, capsys
 ):
