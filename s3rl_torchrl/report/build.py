@@ -196,18 +196,22 @@ def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
                 setting = next(iter(paper.values()))
                 for protocol, read in _protocol_groups(group):
                     s = summarize(read)
+                    ours = {"reward": s.reward_episodes.mean, "cost": s.cost_episodes.mean}
+                    beyond = [m for m in ("reward", "cost") if m in paper
+                              and abs(ours[m] - paper[m].mean) > paper[m].std]
                     rows.append([
                         task, group.algo, f"{table} ({setting.method}, {setting.setting})",
                         _ms(s.reward_episodes), _paper(paper.get("reward")),
                         _ms(s.cost_episodes), _paper(paper.get("cost")),
                         _ms(s.length_seeds, 1), _paper(lengths[0] if lengths else None, 1),
-                        protocol,
+                        ", ".join(beyond) or "–", protocol,
                     ])
     if not rows:
         return ["The paper reports none of these tasks (or none of these algos)."]
     header = ["task", "algo", "paper's row", "reward (ours)", "reward (paper)", "cost (ours)",
-              "cost (paper)", "length (ours)", "length (paper)", "ours evaluated"]
-    return _table(header, rows, "lllrrrrrrl")
+              "cost (paper)", "length (ours)", "length (paper)", "beyond the paper's std",
+              "ours evaluated"]
+    return _table(header, rows, "lllrrrrrrll")
 
 
 def _paper(value, digits: int = 2) -> str:
@@ -559,7 +563,9 @@ def build_report(
         f"The paper's numbers (\"{PAPER_TITLE}\", Table 1: 10 evaluation episodes after "
         "training; Table 2: ablation after 100 epochs) beside ours (pooled episodes). Ours are "
         "whatever these runs' settings are: compare only runs at the paper's settings "
-        "(`experiment=paper`).",
+        "(`experiment=paper`). *beyond the paper's std*: the metrics whose mean here is "
+        "further from the paper's mean than the paper's own std (its spread over episodes): "
+        "where the difference needs a reason (settings, task version, protocol).",
         "",
         *_paper_comparison(by_task),
         "",

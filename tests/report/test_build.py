@@ -86,6 +86,14 @@ def test_report_on_synthetic_runs(tmp_path, make_run):
 
     # The paper's Table 1 numbers for this task (our v1 id = the paper's Gymnasium-API id).
     assert "| Table 1 (S3RL, Lag) |" in text and "2828.95 ± 50.71" in text
+    # Beyond the paper's spread: reward 127.5 against 2828.95 ± 50.71 is; cost 1.5 against
+    # 1.70 ± 4.43 is not. SAC-Lag's cost 13 against 0.30 ± 1.33 is too.
+    paper_row = next(line for line in text.splitlines()
+                     if line.startswith(f"| {TASK} | s3rl | Table 1 (S3RL, Lag) |"))
+    assert paper_row.endswith("| reward | last policy |")
+    paper_row = next(line for line in text.splitlines()
+                     if line.startswith(f"| {TASK} | sac_lag | Table 1 (SAC-LAG, Lag) |"))
+    assert paper_row.endswith("| reward, cost | last policy |")
     # Figure 3's difference in percentage points: (194 - 160) / 200 * 100 = 17.0
     # (the paper quotes no Figure 3 difference for HalfCheetah: last column empty)
     assert f"| {TASK} | sac_lag | 80.0 ± 0.0 | +17.0 |  |" in text

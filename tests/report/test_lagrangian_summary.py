@@ -202,7 +202,7 @@ def test_a_report_of_a_directory_named_like_a_subcommand_is_written_with_a_path(
     assert set(SUBCOMMANDS) == {"lagrangian", "compare-runs"}
     # The report's own arguments are as before: RUNS first, then its options.
     args = parse_args(["./lagrangian", "--out", str(tmp_path)])
-    assert (args.runs, args.out) == ("./lagrangian", str(tmp_path))
+    assert (args.runs, args.out) == (["./lagrangian"], str(tmp_path))
 
 
 def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
