@@ -132,8 +132,9 @@ def _table1_coverage(by_task: dict[str, list[RunGroup]], reference: str) -> list
         (covered if reference in algos and len(algos) > 1 else missing).append(paper_task)
     if not covered:
         return []
-    line = (f"The paper's Table 1 has {len(paper_tasks)} tasks; {len(covered)} of them have "
-            f"finished runs of {reference} and another algo here")
+    line = (f"The paper's Table 1 has {len(paper_tasks)} tasks; {len(covered)} of them "
+            f"{'has' if len(covered) == 1 else 'have'} finished runs of {reference} and another "
+            "algo here")
     if missing:
         line += ". Not (yet) here: " + ", ".join(missing)
     return [line + ".", ""]
