@@ -215,6 +215,40 @@ def _paper_comparison(by_task: dict[str, list[RunGroup]]) -> list[str]:
     return _table(header, rows, "lllrrrrrrll")
 
 
+def _table1_full(by_task: dict[str, list[RunGroup]]) -> list[str]:
+    """The paper's Table 1, every task in its order with each of its algos' rows, and ours
+    beside each under both protocols ("–" where this report has no finished run of it)."""
+    table1 = [v for v in load_paper_results() if v.table == "Table 1" and v.algo]
+    rows = []
+    for paper_task in dict.fromkeys(v.task for v in table1):
+        names = task_aliases(paper_task)
+        ours = {g.algo: g for task, groups in by_task.items() if task in names
+                for g in groups if g.finished and not g.extra}
+        for algo in dict.fromkeys(v.algo for v in table1):
+            paper = {v.metric: v for v in table1 if v.task == paper_task and v.algo == algo}
+            cells = []
+            for protocol in PROTOCOLS:
+                read = under_protocol(ours[algo], protocol) if algo in ours else None
+                if read is None or not read.finished:
+                    cells.append("–")
+                    continue
+                s = summarize(read)
+                cells.append(f"{s.reward_episodes.mean:.2f} / {s.cost_episodes.mean:.2f}"
+                             + (f" {OVER_LIMIT}" if s.over_limit else "")
+                             + f" ({len(s.seeds)})")
+            rows.append([paper_task, paper["reward"].method,
+                         f"{paper['reward'].mean:.2f} / {paper['cost'].mean:.2f}", *cells])
+    if all(row[-2] == "–" for row in rows):
+        return []
+    header = ["task (the paper's id)", "algo", "paper: reward / cost",
+              *(f"ours, {label}: reward / cost (seeds)" for label in PROTOCOLS.values())]
+    return ["### Table 1 in full", "",
+            "Every task and algo of the paper's Table 1, in its order; ours are means over the "
+            f"pooled final-evaluation episodes; {OVER_LIMIT}: over the cost limit (mean over "
+            "seeds); –: no finished run of it in this report.", "",
+            *_table(header, rows, "llrrr"), ""]
+
+
 def _paper(value, digits: int = 2) -> str:
     if value is None:
         return "–"
@@ -570,6 +604,7 @@ def build_report(
         "",
         *_paper_comparison(by_task),
         "",
+        *_table1_full(by_task),
         "## Beside other libraries' published results",
         "",
         "What OmniSafe's off-policy benchmark (Table 2: 10 evaluation episodes over several "

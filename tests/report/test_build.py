@@ -161,7 +161,7 @@ def test_several_roots_make_one_report_that_names_the_paper_tasks_left_out(
 ):
     """Two results trees (the evidence tasks and the other Table 1 tasks) in one report: the
     tables of both, and the paper's Table 1 tasks that neither has."""
-    _sweep(tmp_path, make_run)  # HalfCheetah, both algos, below sweep/
+    rewards = _sweep(tmp_path, make_run)  # HalfCheetah, both algos, below sweep/
     for algo in ("s3rl", "sac_lag"):
         for seed in (1, 2):
             make_run(tmp_path / "other" / f"{algo}_seed{seed}", "SafetyBallRun-v0", algo, seed)
@@ -178,6 +178,21 @@ def test_several_roots_make_one_report_that_names_the_paper_tasks_left_out(
     assert len(left_out) == 14 and "SafetyAntRun-v0" in left_out
     assert "SafetyBallRun-v0" not in left_out and "SafetyHalfCheetahVelocityGymnasium-v1" not in (
         left_out)
+
+    # Table 1 in full: the paper's 16 tasks x 2 algos, ours beside them where they ran.
+    full = text.split("### Table 1 in full")[1].split("\n## ")[0]
+    rows = [line for line in full.splitlines() if line.startswith("| Safety")]
+    assert len(rows) == 32
+    s3rl_pooled = np.mean(np.concatenate([rewards["s3rl", s] for s in (1, 2, 3)]))
+    assert (f"| SafetyHalfCheetahVelocityGymnasium-v1 | S3RL | 2828.95 / 1.70 | "
+            f"{s3rl_pooled:.2f} / 1.50 (3) | – |") in rows
+    # make_run's default episodes: rewards 10 + seed, 12 + seed, 11, 9; costs 0, 2, 1, 3.
+    ball = (11 + 13 + 11 + 9 + 12 + 14 + 11 + 9) / 8
+    assert f"| SafetyBallRun-v0 | SAC-LAG | -411.08 / 80.02 | {ball:.2f} / 1.50 (2) | – |" in rows
+    assert any(r.startswith("| SafetyAntRun-v0 | S3RL |") and r.endswith("/ 1.50 (1) | – |")
+               for r in rows)
+    assert any(r.startswith("| SafetyAntRun-v0 | SAC-LAG |") and r.endswith("| – | – |")
+               for r in rows)
 
     # The same seed of a group below both roots is reported once or not at all.
     make_run(tmp_path / "again" / "s3rl_seed1", "SafetyBallRun-v0", "s3rl", 1)
