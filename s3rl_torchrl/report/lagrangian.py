@@ -6,7 +6,10 @@
 Reads any ``s3rl-train`` run directories (``config.json``, ``metrics.csv``, ``final_eval.json``
 if the run finished, and the CSV logger's ``lagrangian/value`` if the run kept it). Per run, over
 the second half of training (epochs whose frame count is above half the last one): the fraction
-of epochs whose evaluation cost and whose training-episode cost exceed the limit, the mean
+of epochs whose evaluation cost and whose training-episode cost exceed the limit, and of those
+where the two fall on opposite sides of it (``train_over_eval_within``,
+``train_within_eval_over``: the multiplier is fed the stochastic policy's training cost, the
+targets read the deterministic evaluation), the mean
 |delta lambda| between consecutive epochs and, when the run kept torchrl's CSV log
 (``logger=csv``, the default), between consecutive lambda updates; the mean evaluation and
 training reward and cost; the lag-1 autocorrelation of the training cost (what the controller
@@ -62,6 +65,8 @@ def algo_dir(root: Path, task: str, algo: str) -> Path:
 METRICS = (
     "eval_cost_over_limit",
     "train_cost_over_limit",
+    "train_over_eval_within",
+    "train_within_eval_over",
     "mean_abs_dlambda_epoch",
     "mean_abs_dlambda_update",
     "lambda_mean",
@@ -199,6 +204,12 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         values = [v for v in values if not math.isnan(v)]
         return sum(v > limit for v in values) / len(values) if values else math.nan
 
+    def split(train_over: bool) -> float:
+        pairs = [(t, e) for t, e in zip(col["train/cost"], col["eval/cost"])
+                 if not (math.isnan(t) or math.isnan(e))]
+        hits = sum((t > limit) == train_over and (e > limit) != train_over for t, e in pairs)
+        return hits / len(pairs) if pairs else math.nan
+
     lams = col["lagrangian"]
     lambda_peak, peak_frames = max(
         ((_float(r.get("lagrangian")), f) for r, f in zip(rows, frames)),
@@ -216,6 +227,11 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "epochs_second_half": len(late),
         "eval_cost_over_limit": over(col["eval/cost"]),
         "train_cost_over_limit": over(col["train/cost"]),
+        # The multiplier is fed the training episodes' cost (the stochastic policy's); the
+        # targets read the deterministic evaluation. The share of epochs where the two fall on
+        # opposite sides of the limit, each way round.
+        "train_over_eval_within": split(train_over=True),
+        "train_within_eval_over": split(train_over=False),
         "mean_abs_dlambda_epoch": _mean([abs(b - a) for a, b in zip(lams, lams[1:])]),
         "mean_abs_dlambda_update": _mean([abs(b - a) for a, b in zip(updates, updates[1:])]),
         "lambda_mean": _mean(lams),

@@ -71,6 +71,8 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert (s["frames"], s["epochs_second_half"], s["seed"]) == (120000, 3, 10)
     assert s["eval_cost_over_limit"] == pytest.approx(1 / 3)  # 900 | 0, 5
     assert s["train_cost_over_limit"] == pytest.approx(2 / 3)  # 20, 15 | 0
+    # (train, eval) cost: (20, 900) both over, (15, 0) training over only, (0, 5) both within.
+    assert (s["train_over_eval_within"], s["train_within_eval_over"]) == (pytest.approx(1 / 3), 0)
     assert s["mean_abs_dlambda_epoch"] == pytest.approx((99.5 + 1.5) / 2)
     assert s["mean_abs_dlambda_update"] == pytest.approx((50 + 49.5 + 1.5) / 3)
     assert s["lambda_mean"] == pytest.approx(102.5 / 3)
@@ -97,6 +99,9 @@ def test_second_half_statistics_by_hand(tmp_path):
     assert row["mean_abs_dlambda_epoch"] == pytest.approx((50.5 + 101) / 2)
     assert row["final_reward"] == 2500.0 and math.isnan(row["final_reward_std"])
     assert row["eval_cost_last20"] == pytest.approx((5.0 + 50.0) / 2)
+    # Seed 20: (20, 50), (15, 50) both over, (0, 50) evaluation over only.
+    assert row["train_within_eval_over"] == pytest.approx((0 + 1 / 3) / 2)
+    assert row["train_over_eval_within"] == pytest.approx((1 / 3 + 0) / 2)
     assert (row["lambda_peak"], row["lambda_end"]) == (150.0, 3.0)  # seed 20's are twice seed 10's
     line = ld.markdown(report["settings"]).splitlines()[-1]
     assert line.endswith("| 1000 | 27.5 | 2500 | 3.0 |")  # one final evaluation: no std
