@@ -120,15 +120,19 @@ def _table1(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     return _table(header, rows, "llrrrrrrrrl")
 
 
+def _finished_groups_of(by_task: dict[str, list[RunGroup]], paper_task: str) -> list[RunGroup]:
+    """The groups with finished runs of a paper task, under any of its ids."""
+    names = task_aliases(paper_task)
+    return [g for task, groups in by_task.items() if task in names for g in groups if g.finished]
+
+
 def _table1_coverage(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
     """Which of the paper's Table 1 tasks have finished runs here of both the reference and
     another algo: a partial reproduction says what it leaves out."""
     paper_tasks = sorted({v.task for v in load_paper_results() if v.table == "Table 1"})
     covered, missing = [], []
     for paper_task in paper_tasks:
-        names = task_aliases(paper_task)
-        algos = {g.algo for task, groups in by_task.items() if task in names
-                 for g in groups if g.finished}
+        algos = {g.algo for g in _finished_groups_of(by_task, paper_task)}
         (covered if reference in algos and len(algos) > 1 else missing).append(paper_task)
     if not covered:
         return []
@@ -221,9 +225,7 @@ def _table1_full(by_task: dict[str, list[RunGroup]]) -> list[str]:
     table1 = [v for v in load_paper_results() if v.table == "Table 1" and v.algo]
     rows = []
     for paper_task in dict.fromkeys(v.task for v in table1):
-        names = task_aliases(paper_task)
-        ours = {g.algo: g for task, groups in by_task.items() if task in names
-                for g in groups if g.finished and not g.extra}
+        ours = {g.algo: g for g in _finished_groups_of(by_task, paper_task) if not g.extra}
         for algo in dict.fromkeys(v.algo for v in table1):
             paper = {v.metric: v for v in table1 if v.task == paper_task and v.algo == algo}
             cells = []
