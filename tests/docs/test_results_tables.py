@@ -98,6 +98,7 @@ def test_the_evidence_sections_have_their_tables():
         "SafetyDroneRun-v0",
         "SafetyBallCircle-v0",
         "SafetyHalfCheetahVelocity-v1",
+        "SafetyHopperVelocity-v1",
         "SafetyPointGoal1-v0",
     }
     assert set(FSRL_CRITICS) == {
