@@ -7,6 +7,7 @@ module (``velocity``, ``bullet``, ``circle``, ``goal``) can build its entries wi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 #: The task families; each has its own module and Gymnasium registration.
 FAMILIES: tuple[str, ...] = ("velocity", "bullet", "circle", "goal")
@@ -31,10 +32,14 @@ class SafeSettings:
         lagrangian_lr: the multiplier's Adam rate per gradient step (``algo.lagrangian_lr``).
         lagrangian_warmup_frames: frames before lambda first moves
             (``algo.lagrangian_warmup_frames``).
+        cost_critic_read: how the SAC family's sound critics read their cost pair
+            (``algo.cost_critic_read`` of ``critic=sound``, whose default is ``"max"``):
+            ``"max"``, ``"mean"`` or ``"min"``. ``critic=fsrl`` keeps FSRL's ``"min"``.
     """
 
     lagrangian_lr: float | None = None
     lagrangian_warmup_frames: int | None = None
+    cost_critic_read: Literal["min", "max", "mean"] | None = None
 
 
 @dataclass(frozen=True)

@@ -400,6 +400,28 @@ def test_safe_preset_reads_the_task_registry(compose):
     assert paper.task.cost_limit == 10.0 and paper.algo.lagrangian_warmup_frames == 0
 
 
+def test_sound_critics_read_the_cost_pair_as_the_task_registry_says(compose):
+    from s3rl_torchrl.envs import get_task
+
+    hopper = "SafetyHopperVelocity-v1"
+    assert get_task(hopper).safe.cost_critic_read == "mean"
+    for algo in ("sac_lag", "s3rl"):
+        cfg = validate(compose("experiment=safe", f"task={hopper}", f"algo={algo}"))
+        assert cfg.algo.cost_critic_read == "mean" and cfg.algo.cost_nonnegative
+    # The paper's id of the same task shares the entry; the v5 robot, a different task, does not.
+    paper_id = validate(compose("experiment=safe", "task=SafetyHopperVelocityGymnasium-v1"))
+    assert paper_id.algo.cost_critic_read == "mean"
+    v5 = validate(compose("experiment=safe", "task=SafetyHopperVelocityMujocoV5-v1"))
+    assert v5.algo.cost_critic_read == "max"
+    # Elsewhere the sound read is the max; FSRL's critics and the command line still win.
+    cheetah = validate(compose("experiment=safe", "task=SafetyHalfCheetahVelocity-v1"))
+    assert cheetah.algo.cost_critic_read == "max"
+    fsrl = validate(compose("experiment=safe", f"task={hopper}", "critic=fsrl"))
+    assert fsrl.algo.cost_critic_read == "min"
+    mine = validate(compose("experiment=safe", f"task={hopper}", "algo.cost_critic_read=max"))
+    assert mine.algo.cost_critic_read == "max"
+
+
 def test_safe_preset_has_the_sound_critics_and_paper_fsrls(compose):
     safe = validate(compose("experiment=safe", "algo=sac_lag"))
     assert (safe.algo.cost_critic_read, safe.algo.cost_nonnegative) == ("max", True)
