@@ -60,7 +60,8 @@ BINARY = s3rl (algo.contrastive_cfg.label=binary)
 # Rebuild the reports in docs/ from the small result files kept in results/ (config.json,
 # metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
 # Table 2 comparison of algorithms, the experiment=safe evidence (results/safe: FSRL's critics;
-# results/safe_sound: the sound critics, the preset since issue 35), and the 300k-frame
+# results/safe_sound: the sound critics, the preset since issue 35; results/safe_sound_hopper_max:
+# Hopper's first sound-critic runs, under the max read replaced by selection round 5), and the 300k-frame
 # experiment=safe runs (SafetyPointGoal1, graded labels).
 # What the critic selection's runs differ in besides the task (configs/sweep/critic_*.yaml).
 SELECTION_GROUPS = --group-by algo.cost_critic_read --group-by algo.cost_nonnegative \
@@ -77,6 +78,10 @@ report: $(STAMP)
 	$(BIN)/s3rl-report results/safe_sound --out docs/safe_sound
 	$(BIN)/s3rl-report lagrangian results/safe_sound/*/seed* \
 		--out docs/safe_sound/lagrangian.json --plot docs/safe_sound/lagrangian.png
+	$(BIN)/s3rl-report results/safe_sound_hopper_max --out docs/safe_sound_hopper_max
+	$(BIN)/s3rl-report lagrangian results/safe_sound_hopper_max/*/seed* \
+		--out docs/safe_sound_hopper_max/lagrangian.json \
+		--plot docs/safe_sound_hopper_max/lagrangian.png
 	$(BIN)/s3rl-report results/safe_300k --out docs/safe_300k \
 		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
 	$(BIN)/s3rl-report lagrangian results/safe_300k/*/seed* \

@@ -2,9 +2,10 @@
 
 Those tables are written by hand, beside the text that reads them; this test recomputes their
 numbers from each run's `final_eval.json` and `metrics.csv` (the columns' definitions are the
-ones docs/results.md gives), so that a copied or stale number fails here. Two sections hold
-them: the sound preset's evidence (results/safe_sound, every column) and the previous preset's
-(results/safe, the final evaluation's columns).
+ones docs/results.md gives), so that a copied or stale number fails here. Three sections hold
+them: the sound preset's evidence (results/safe_sound, every column), Hopper's first evidence
+under the max read of the cost pair, before selection round 5 (results/safe_sound_hopper_max,
+every column), and the previous preset's (results/safe, the final evaluation's columns).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ HEADER = (
 
 SOUND_SECTION = "### The evidence (seeds 10, 20, 30, 1M frames)"
 FSRL_CRITICS_SECTION = "### The evidence: seeds 10, 20, 30, 1M frames, under `experiment=safe`"
+HOPPER_MAX_READ_SECTION = "#### SafetyHopperVelocity-v1 under the max read"
 
 
 def evidence_tables(title: str) -> dict[str, list[list[str]]]:
@@ -88,6 +90,7 @@ def run_stats(root: str, task: str, algo: str, seed: int) -> dict:
 
 SOUND = evidence_tables(SOUND_SECTION)
 FSRL_CRITICS = evidence_tables(FSRL_CRITICS_SECTION)
+HOPPER_MAX_READ = evidence_tables(HOPPER_MAX_READ_SECTION)
 
 
 def test_the_evidence_sections_have_their_tables():
@@ -106,6 +109,7 @@ def test_the_evidence_sections_have_their_tables():
         "SafetyHopperVelocity-v1",
         "SafetyBallRun-v0",
     }
+    assert set(HOPPER_MAX_READ) == {"SafetyHopperVelocity-v1"}
 
 
 def check_final_evaluation(root: str, task: str, rows: list[list[str]]) -> list[list[dict]]:
@@ -141,10 +145,14 @@ def check_final_evaluation(root: str, task: str, rows: list[list[str]]) -> list[
     return per_algo
 
 
-@pytest.mark.parametrize("task", sorted(SOUND))
-def test_sound_preset_table_matches_the_committed_runs(task):
-    rows = SOUND[task]
-    per_algo = check_final_evaluation("safe_sound", task, rows)
+@pytest.mark.parametrize(
+    "root, task",
+    [("safe_sound", task) for task in sorted(SOUND)]
+    + [("safe_sound_hopper_max", task) for task in sorted(HOPPER_MAX_READ)],
+)
+def test_sound_preset_table_matches_the_committed_runs(root, task):
+    rows = (SOUND if root == "safe_sound" else HOPPER_MAX_READ)[task]
+    per_algo = check_final_evaluation(root, task, rows)
     for last, runs in zip((rows[0], rows[2]), per_algo):
         where = f"{task} {last[0]}"
         lambdas = numbers(last[6])
