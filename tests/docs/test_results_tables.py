@@ -17,6 +17,7 @@ import statistics
 from pathlib import Path
 
 import pytest
+from scipy.stats import ttest_rel
 
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "results.md"
@@ -173,3 +174,107 @@ def test_sound_preset_table_matches_the_committed_runs(root, task):
 @pytest.mark.parametrize("task", sorted(FSRL_CRITICS))
 def test_fsrl_critics_table_matches_the_committed_runs(task):
     check_final_evaluation("safe", task, FSRL_CRITICS[task])
+
+
+# Table 1 in full: the sixteen tasks' final evaluation, from results/safe_sound (the evidence's
+# seven tasks) and results/table1 (sweep=table1's nine), beside the paper's file.
+TABLE1_SECTION = "## Table 1 in full: sixteen tasks under `experiment=safe`"
+TABLE1_ROOTS = ("safe_sound", "table1")
+TABLE1_HEADER = "| task | algo | seeds | paper: reward / cost |"
+PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
+
+
+def section_table(title: str, header: str) -> list[list[str]]:
+    """The cells of each row of the table under `header` in the doc's section `title`."""
+    section = re.split(r"\n## ", DOC.read_text().split(title, 1)[1], maxsplit=1)[0]
+    lines = section.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 2
+    rows = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
+
+
+def table1_runs(task: str, algo: str) -> dict[int, dict]:
+    """seed -> final_eval.json of every exported run of (task, algo) in either tree."""
+    found = {}
+    for root in TABLE1_ROOTS:
+        for seed in SEEDS:
+            path = RESULTS / root / f"{algo}_{task}" / f"seed{seed}" / "final_eval.json"
+            if path.exists():
+                assert seed not in found, f"{task} {algo} seed {seed} is in both trees"
+                found[seed] = json.loads(path.read_text())
+    return found
+
+
+def paper_table1() -> dict[tuple[str, str], dict[str, float]]:
+    """(the paper's task id, algo) -> {"reward": mean, "cost": mean}, read from the CSV file
+    directly (tests/report checks that file against the paper's printed tables)."""
+    path = ROOT / "s3rl_torchrl" / "report" / "data" / "paper_results.csv"
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
+    values: dict[tuple[str, str], dict[str, float]] = {}
+    for row in csv.DictReader(lines):
+        if row["table"] == "Table 1" and row["algo"] and row["metric"] in ("reward", "cost"):
+            values.setdefault((row["task"], row["algo"]), {})[row["metric"]] = float(row["mean"])
+    return values
+
+
+TABLE1 = section_table(TABLE1_SECTION, TABLE1_HEADER)
+PAIRED = section_table(TABLE1_SECTION, PAIRED_HEADER)
+
+
+def paper_id(task: str) -> str:
+    # The velocity and Safety-Gymnasium tasks' paper ids add "Gymnasium" before the version.
+    name, version = task.rsplit("-", 1)
+    ids = {task for task, _ in paper_table1()}
+    return task if task in ids else f"{name}Gymnasium-{version}"
+
+
+def test_table1_has_every_task_of_the_paper_for_both_algos():
+    written = [(paper_id(row[0]), ALGOS[row[1]]) for row in TABLE1]
+    assert sorted(written) == sorted(paper_table1())
+    assert len(written) == 32
+
+
+@pytest.mark.parametrize("row", TABLE1, ids=lambda row: f"{row[0]}-{row[1]}")
+def test_table1_row_matches_the_paper_and_the_committed_runs(row):
+    task, algo, seeds, paper, last, best = row
+    expected = paper_table1()[(paper_id(task), ALGOS[algo])]
+    paper_reward, paper_cost = numbers(paper)
+    assert close(paper_reward, expected["reward"]) and close(paper_cost, expected["cost"])
+    runs = table1_runs(task, ALGOS[algo])
+    assert int(seeds) == len(runs), f"{task} {algo}: {len(runs)} runs exported"
+    if not runs:
+        assert last == best == "pending"
+        return
+    for cell, final in ((last, lambda r: r), (best, lambda r: r["best_feasible"])):
+        reward, cost = numbers(cell)
+        assert close(reward, statistics.mean(final(r)["reward_mean"] for r in runs.values()))
+        assert close(cost, statistics.mean(final(r)["cost_mean"] for r in runs.values()))
+
+
+def test_table1_paired_tests_cover_the_complete_tasks():
+    complete = [
+        row[0]
+        for row in TABLE1
+        if row[1] == "S3RL"
+        and len(table1_runs(row[0], "s3rl")) == len(SEEDS)
+        and len(table1_runs(row[0], "sac_lag")) == len(SEEDS)
+    ]
+    assert [row[0] for row in PAIRED] == [task for task in complete for _ in range(2)]
+    assert [row[1] for row in PAIRED] == ["last", "best-feasible"] * len(complete)
+
+
+@pytest.mark.parametrize("row", PAIRED, ids=lambda row: f"{row[0]}-{row[1]}")
+def test_table1_paired_test_matches_scipy(row):
+    task, policy, *cells = row
+    s3rl, sac_lag = table1_runs(task, "s3rl"), table1_runs(task, "sac_lag")
+    final = (lambda r: r) if policy == "last" else (lambda r: r["best_feasible"])
+    for cell, key in zip(cells, ("reward_mean", "cost_mean"), strict=True):
+        a = [final(s3rl[seed])[key] for seed in SEEDS]
+        b = [final(sac_lag[seed])[key] for seed in SEEDS]
+        difference, p = numbers(cell)
+        assert close(difference, statistics.mean(a) - statistics.mean(b)), f"{task} {cell}"
+        assert close(p, ttest_rel(a, b).pvalue), f"{task} {cell}"
