@@ -35,6 +35,18 @@ def test_task_option_carries_the_registry_defaults(task, compose):
     assert cfg.eval.max_steps == spec.max_episode_steps
 
 
+@pytest.mark.parametrize("task", task_names(include_aliases=False))
+def test_safe_preset_validates_with_each_tasks_registry_settings(task, compose):
+    # A registry value the algo config would refuse (e.g. a cost_critic_read outside
+    # COST_CRITIC_READS) fails here, not when a run of that task starts.
+    spec = get_task(task)
+    cfg = validate(compose("experiment=safe", f"task={task}", "compile=false"))
+    assert cfg.task.cost_limit == spec.safe_cost_limit
+    for name, value in dataclasses.asdict(spec.safe).items():
+        if value is not None:
+            assert getattr(cfg.algo, name) == value, name
+
+
 def test_overrides_win_over_registry_defaults(compose):
     cfg = validate(compose("task=SafetyBallRun-v0", "compile=false", "eval.max_steps=7",
                            "task.cost_limit=3"))
