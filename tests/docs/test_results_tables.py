@@ -42,17 +42,21 @@ def evidence_tables(title: str) -> dict[str, list[list[str]]]:
     tables: dict[str, list[list[str]]] = {}
     for block in re.split(r"\n(?=\*\*Safety)", section)[1:]:
         task = re.match(r"\*\*(Safety\w+-v\d)", block).group(1)
-        lines = block.splitlines()
-        if not any(line.startswith(HEADER) for line in lines):
-            continue
-        start = next(i for i, line in enumerate(lines) if line.startswith(HEADER)) + 2
-        rows = []
-        for line in lines[start:]:
-            if not line.startswith("|"):
-                break
-            rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
-        tables[task] = rows
+        if HEADER in block:
+            tables[task] = table_rows(block, HEADER)
     return tables
+
+
+def table_rows(text: str, header: str) -> list[list[str]]:
+    """The cells of each row of the first table in `text` whose header starts with `header`."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 2
+    rows = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
 
 
 def close(written: str, value: float) -> bool:
@@ -187,14 +191,7 @@ PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 def section_table(title: str, header: str) -> list[list[str]]:
     """The cells of each row of the table under `header` in the doc's section `title`."""
     section = re.split(r"\n## ", DOC.read_text().split(title, 1)[1], maxsplit=1)[0]
-    lines = section.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 2
-    rows = []
-    for line in lines[start:]:
-        if not line.startswith("|"):
-            break
-        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
-    return rows
+    return table_rows(section, header)
 
 
 def table1_runs(task: str, algo: str) -> dict[int, dict]:
