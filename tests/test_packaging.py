@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -34,6 +35,20 @@ def test_every_subpackage_is_in_the_package_list():
     assert PYPROJECT["tool"]["setuptools"]["package-dir"] == {"s3rl_torchrl.configs": "configs"}
     scripts = PYPROJECT["project"]["scripts"]
     assert all(target.startswith("s3rl_torchrl.") for target in scripts.values())
+
+
+def test_installation_doc_says_why_each_dependency_is_there():
+    # docs/installation.md's table has a row per core dependency and per package of the
+    # `report` and `bullet` extras (the ones a user installs for a feature, not for tooling).
+    table = (ROOT / "docs" / "installation.md").read_text().split("## Dependencies", 1)[1]
+    rows = [line.split("|")[1] for line in table.splitlines() if line.startswith("| ")]
+    extras = PYPROJECT["project"]["optional-dependencies"]
+    wanted = PYPROJECT["project"]["dependencies"] + extras["report"] + extras["bullet"]
+    for requirement in wanted:
+        name = re.match(r"[A-Za-z0-9_.-]+", requirement).group(0)
+        if name == "matplotlib":  # the figures' extra, listed under Extras
+            continue
+        assert any(name in row for row in rows), f"no row for {name} in docs/installation.md"
 
 
 def test_a_checkout_reads_the_top_level_configs():
