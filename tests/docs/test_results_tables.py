@@ -2,10 +2,12 @@
 
 Those tables are written by hand, beside the text that reads them; this test recomputes their
 numbers from each run's `final_eval.json` and `metrics.csv` (the columns' definitions are the
-ones docs/results.md gives), so that a copied or stale number fails here. Three sections hold
+ones docs/results.md gives), so that a copied or stale number fails here. Four sections hold
 them: the sound preset's evidence (results/safe_sound, every column), Hopper's first evidence
 under the max read of the cost pair, before selection round 5 (results/safe_sound_hopper_max,
-every column), and the previous preset's (results/safe, the final evaluation's columns).
+every column), the previous preset's (results/safe, the final evaluation's columns), and Table 1
+in full (results/safe_sound with results/table1 beside the paper's file: the sixteen tasks'
+rows, the paired tests over seeds and rliable's aggregate over the complete tasks).
 """
 
 from __future__ import annotations
@@ -275,3 +277,31 @@ def test_table1_paired_test_matches_scipy(row):
         difference, p = numbers(cell)
         assert close(difference, statistics.mean(a) - statistics.mean(b)), f"{task} {cell}"
         assert close(p, ttest_rel(a, b).pvalue), f"{task} {cell}"
+
+
+ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+
+
+def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
+    # The aggregate quoted before the sixteen tasks are in: rliable's statistics over the tasks
+    # whose both algos have three seeds (the report's own defaults: 2000 resamples, seed 0).
+    from s3rl_torchrl.report.aggregate import aggregate
+    from s3rl_torchrl.report.runs import find_runs, group_runs
+
+    groups = group_runs([run for root in TABLE1_ROOTS for run in find_runs(RESULTS / root)])
+    complete = {
+        task
+        for task in {g.task for g in groups}
+        if sorted(len(g.finished) for g in groups if g.task == task) == [len(SEEDS)] * 2
+    }
+    result = aggregate([g for g in groups if g.task in complete], "s3rl")
+    written = {row[0]: row[1:] for row in section_table(TABLE1_SECTION, ANSWER_HEADER)}
+    assert set(written) == {"last", "best-feasible"}
+    for read in result.protocols:
+        cost, reward, within, iqm = written[read.protocol.replace("_", "-")]
+        (pair,) = read.pairs
+        assert len(pair.tasks) == len(complete)
+        assert (cost, reward) == (pair.cost.cell(), pair.reward.cell())
+        s3rl, sac_lag = read.algos
+        assert within == " / ".join("{} of {}".format(*row.within_count) for row in (s3rl, sac_lag))
+        assert iqm == f"{s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()}"
