@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 from scipy.stats import ttest_rel
 
+from s3rl_torchrl.report.paper import load_paper_results, paper_results_for
+
 ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "results.md"
 RESULTS = ROOT / "results"
@@ -208,39 +210,45 @@ def table1_runs(task: str, algo: str) -> dict[int, dict]:
     return found
 
 
-def paper_table1() -> dict[tuple[str, str], dict[str, float]]:
-    """(the paper's task id, algo) -> {"reward": mean, "cost": mean}, read from the CSV file
-    directly (tests/report checks that file against the paper's printed tables)."""
-    path = ROOT / "s3rl_torchrl" / "report" / "data" / "paper_results.csv"
-    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
-    values: dict[tuple[str, str], dict[str, float]] = {}
-    for row in csv.DictReader(lines):
-        if row["table"] == "Table 1" and row["algo"] and row["metric"] in ("reward", "cost"):
-            values.setdefault((row["task"], row["algo"]), {})[row["metric"]] = float(row["mean"])
-    return values
+def paper_table1(task: str, algo: str) -> dict[str, float]:
+    """The paper's Table 1 reward and cost of (task, algo), by any of the task's ids, from
+    the package's copy of it (tests/report checks that file against the paper's tables)."""
+    return {
+        v.metric: v.mean
+        for v in paper_results_for(task)
+        if v.table == "Table 1" and v.algo == algo and v.metric in ("reward", "cost")
+    }
+
+
+def complete_tasks() -> list[str]:
+    """The tasks of Table 1 in full whose both algos have every seed exported, in its order."""
+    return [
+        row[0]
+        for row in TABLE1
+        if row[1] == "S3RL"
+        and all(len(table1_runs(row[0], algo)) == len(SEEDS) for algo in ("s3rl", "sac_lag"))
+    ]
 
 
 TABLE1 = section_table(TABLE1_SECTION, TABLE1_HEADER)
 PAIRED = section_table(TABLE1_SECTION, PAIRED_HEADER)
 
 
-def paper_id(task: str) -> str:
-    # The velocity and Safety-Gymnasium tasks' paper ids add "Gymnasium" before the version.
-    name, version = task.rsplit("-", 1)
-    ids = {task for task, _ in paper_table1()}
-    return task if task in ids else f"{name}Gymnasium-{version}"
-
-
 def test_table1_has_every_task_of_the_paper_for_both_algos():
-    written = [(paper_id(row[0]), ALGOS[row[1]]) for row in TABLE1]
-    assert sorted(written) == sorted(paper_table1())
-    assert len(written) == 32
+    paper = {(v.task, v.algo) for v in load_paper_results() if v.table == "Table 1" and v.algo}
+    written = {
+        (v.task, v.algo)
+        for task, algo, *_ in TABLE1
+        for v in paper_results_for(task)
+        if v.table == "Table 1" and v.algo == ALGOS[algo]
+    }
+    assert written == paper and len(TABLE1) == len(paper) == 32
 
 
 @pytest.mark.parametrize("row", TABLE1, ids=lambda row: f"{row[0]}-{row[1]}")
 def test_table1_row_matches_the_paper_and_the_committed_runs(row):
     task, algo, seeds, paper, last, best = row
-    expected = paper_table1()[(paper_id(task), ALGOS[algo])]
+    expected = paper_table1(task, ALGOS[algo])
     paper_reward, paper_cost = numbers(paper)
     assert close(paper_reward, expected["reward"]) and close(paper_cost, expected["cost"])
     runs = table1_runs(task, ALGOS[algo])
@@ -255,13 +263,7 @@ def test_table1_row_matches_the_paper_and_the_committed_runs(row):
 
 
 def test_table1_paired_tests_cover_the_complete_tasks():
-    complete = [
-        row[0]
-        for row in TABLE1
-        if row[1] == "S3RL"
-        and len(table1_runs(row[0], "s3rl")) == len(SEEDS)
-        and len(table1_runs(row[0], "sac_lag")) == len(SEEDS)
-    ]
+    complete = complete_tasks()
     assert [row[0] for row in PAIRED] == [task for task in complete for _ in range(2)]
     assert [row[1] for row in PAIRED] == ["last", "best-feasible"] * len(complete)
 
@@ -289,11 +291,7 @@ def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
     from s3rl_torchrl.report.runs import find_runs, group_runs
 
     groups = group_runs([run for root in TABLE1_ROOTS for run in find_runs(RESULTS / root)])
-    complete = {
-        task
-        for task in {g.task for g in groups}
-        if sorted(len(g.finished) for g in groups if g.task == task) == [len(SEEDS)] * 2
-    }
+    complete = set(complete_tasks())
     result = aggregate([g for g in groups if g.task in complete], "s3rl")
     written = {row[0]: row[1:] for row in section_table(TABLE1_SECTION, ANSWER_HEADER)}
     assert set(written) == {"last", "best-feasible"}
