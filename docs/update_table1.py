@@ -12,13 +12,14 @@ tests/docs/test_results_tables.py checks the doc against the same files on its o
 
 from __future__ import annotations
 
-import json
 import statistics
 from pathlib import Path
 
 from scipy.stats import ttest_rel
 
+from s3rl_torchrl.report.aggregate import aggregate
 from s3rl_torchrl.report.paper import paper_results_for
+from s3rl_torchrl.report.runs import RunGroup, find_runs, group_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
@@ -33,17 +34,10 @@ SEEDS = (10, 20, 30)
 POLICIES = {"last": lambda final: final, "best-feasible": lambda final: final["best_feasible"]}
 
 
-def runs(task: str, algo: str) -> dict[int, dict]:
-    """seed -> final_eval.json of every exported run of (task, algo) in either tree."""
-    found = {}
-    for root in ROOTS:
-        for seed in SEEDS:
-            path = RESULTS / root / f"{algo}_{task}" / f"seed{seed}" / "final_eval.json"
-            if path.exists():
-                if seed in found:
-                    raise SystemExit(f"{task} {algo} seed {seed} is exported to both trees")
-                found[seed] = json.loads(path.read_text())
-    return found
+def exported_groups() -> list[RunGroup]:
+    """Every (task, algo) group of runs in either tree, read with the report's own reader
+    (which refuses a seed exported to both)."""
+    return group_runs([run for root in ROOTS for run in find_runs(RESULTS / root)])
 
 
 def paper(task: str, algo: str) -> str:
@@ -64,8 +58,7 @@ def ours(found: dict[int, dict], policy: str) -> str:
     return f"{reward:.2f} / {cost:.2f}"
 
 
-def paired(task: str, policy: str) -> str:
-    s3rl, sac_lag = runs(task, "s3rl"), runs(task, "sac_lag")
+def paired(s3rl: dict[int, dict], sac_lag: dict[int, dict], policy: str) -> str:
     cells = []
     for key in ("reward_mean", "cost_mean"):
         a = [POLICIES[policy](s3rl[seed])[key] for seed in SEEDS]
@@ -75,13 +68,9 @@ def paired(task: str, policy: str) -> str:
     return " | ".join(cells)
 
 
-def answer(complete: list[str]) -> list[str]:
+def answer(groups: list[RunGroup], complete: list[str]) -> list[str]:
     """rliable's aggregate over the complete tasks' runs alone (the report's defaults: 2000
     resamples, seed 0), one row per protocol: the doc quotes it until all sixteen are in."""
-    from s3rl_torchrl.report.aggregate import aggregate
-    from s3rl_torchrl.report.runs import find_runs, group_runs
-
-    groups = group_runs([run for root in ROOTS for run in find_runs(RESULTS / root)])
     result = aggregate([g for g in groups if g.task in set(complete)], "s3rl")
     rows = []
     for read in result.protocols:
@@ -95,13 +84,19 @@ def answer(complete: list[str]) -> list[str]:
     return rows
 
 
-def replace_table(text: str, header: str, rows: list[str]) -> str:
-    """`text` with the rows of the table whose header starts with `header` replaced."""
-    lines = text.splitlines()
+def table_body(lines: list[str], header: str) -> tuple[int, int]:
+    """Where the rows of the table whose header starts with `header` begin and end."""
     start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 2
     end = start
     while end < len(lines) and lines[end].startswith("|"):
         end += 1
+    return start, end
+
+
+def replace_table(text: str, header: str, rows: list[str]) -> str:
+    """`text` with the rows of the table whose header starts with `header` replaced."""
+    lines = text.splitlines()
+    start, end = table_body(lines, header)
     return "\n".join(lines[:start] + rows + lines[end:]) + "\n"
 
 
@@ -111,31 +106,28 @@ def main() -> None:
     section, *after = section.split("\n## ", 1)
     # The rows keep the doc's task names and order (the paper's), read off the table itself.
     lines = section.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith(TABLE_HEADER)) + 2
-    tasks = []
-    for line in lines[start:]:
-        if not line.startswith("|"):
-            break
-        tasks.append(line.split("|")[1].strip())
-    tasks = list(dict.fromkeys(tasks))
+    start, end = table_body(lines, TABLE_HEADER)
+    tasks = list(dict.fromkeys(line.split("|")[1].strip() for line in lines[start:end]))
+    groups = exported_groups()
+    finals = {(g.task, g.algo): {run.seed: run.final for run in g.finished} for g in groups}
     table, complete = [], []
     for task in tasks:
         for name, algo in ALGOS.items():
-            found = runs(task, algo)
+            found = finals.get((task, algo), {})
             table.append(
                 f"| {task} | {name} | {len(found)} | {paper(task, algo)} "
                 f"| {ours(found, 'last')} | {ours(found, 'best-feasible')} |"
             )
-        if all(len(runs(task, algo)) == len(SEEDS) for algo in ALGOS.values()):
+        if all(sorted(finals.get((task, algo), {})) == list(SEEDS) for algo in ALGOS.values()):
             complete.append(task)
     section = replace_table(section, TABLE_HEADER, table)
     paired_rows = [
-        f"| {task} | {policy} | {paired(task, policy)} |"
+        f"| {task} | {policy} | {paired(finals[task, 's3rl'], finals[task, 'sac_lag'], policy)} |"
         for task in complete
         for policy in POLICIES
     ]
     section = replace_table(section, PAIRED_HEADER, paired_rows)
-    section = replace_table(section, ANSWER_HEADER, answer(complete))
+    section = replace_table(section, ANSWER_HEADER, answer(groups, complete))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")
 
