@@ -1,6 +1,7 @@
 """The per-task evidence tables of docs/results.md say what the committed runs say.
 
-Those tables are written by hand, beside the text that reads them; this test recomputes their
+Most of those tables are written by hand, beside the text that reads them (Table 1 in full's
+are rewritten by docs/update_table1.py, also checked here); this test recomputes their
 numbers from each run's `final_eval.json` and `metrics.csv` (the columns' definitions are the
 ones docs/results.md gives), so that a copied or stale number fails here. Four sections hold
 them: the sound preset's evidence (results/safe_sound, every column), Hopper's first evidence
