@@ -113,16 +113,20 @@ def main() -> None:
     tasks = list(dict.fromkeys(line.split("|")[1].strip() for line in lines[start:end]))
     groups = exported_groups()
     finals = {(g.task, g.algo): {run.seed: run.final for run in g.finished} for g in groups}
-    table, complete = [], []
     for task in tasks:
-        for name, algo in ALGOS.items():
-            found = finals.get((task, algo), {})
-            table.append(
-                f"| {task} | {name} | {len(found)} | {paper(task, algo)} "
-                f"| {ours(found, 'last')} | {ours(found, 'best-feasible')} |"
-            )
-        if all(sorted(finals.get((task, algo), {})) == list(SEEDS) for algo in ALGOS.values()):
-            complete.append(task)
+        for algo in ALGOS.values():
+            finals.setdefault((task, algo), {})
+    table = [
+        f"| {task} | {name} | {len(finals[task, algo])} | {paper(task, algo)} "
+        f"| {ours(finals[task, algo], 'last')} | {ours(finals[task, algo], 'best-feasible')} |"
+        for task in tasks
+        for name, algo in ALGOS.items()
+    ]
+    complete = [
+        task
+        for task in tasks
+        if all(sorted(finals[task, algo]) == list(SEEDS) for algo in ALGOS.values())
+    ]
     section = replace_table(section, TABLE_HEADER, table)
     paired_rows = [
         f"| {task} | {policy} | {paired(finals[task, 's3rl'], finals[task, 'sac_lag'], policy)} |"
