@@ -2,11 +2,13 @@
 
     python docs/update_table1.py        # (make report runs it)
 
-The rows of Table 1 in full (the paper's reward / cost beside ours, last policy and best-feasible
-checkpoint, mean over seeds), the paired tests of the complete tasks (scipy's `ttest_rel` over
-seeds, S3RL minus SAC-Lag) and rliable's aggregate over the complete tasks are recomputed from
-the runs exported to results/safe_sound and results/table1 and from the paper's file; the prose
-around them is left as written (it says what the numbers mean, so reread it after a change).
+The section's status line (how many tasks are complete, how many of `sweep=table1`'s runs are
+exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
+best-feasible checkpoint, mean over seeds), the paired tests of the complete tasks (scipy's
+`ttest_rel` over seeds, S3RL minus SAC-Lag) and rliable's aggregate over the complete tasks are
+recomputed from the runs exported to results/safe_sound and results/table1 and from the paper's
+file; the prose around them is left as written (it says what the numbers mean, so reread it
+after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """
 
@@ -30,15 +32,28 @@ SECTION = "## Table 1 in full: sixteen tasks under `experiment=safe`"
 TABLE_HEADER = "| task | algo | seeds | paper: reward / cost |"
 PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
 POLICIES = {"last": lambda final: final, "best-feasible": lambda final: final["best_feasible"]}
 
 
-def exported_groups() -> list[RunGroup]:
-    """Every (task, algo) group of runs in either tree, read with the report's own reader
-    (which refuses a seed exported to both)."""
-    return group_runs([run for root in ROOTS for run in find_runs(RESULTS / root)])
+def exported_groups(roots: tuple[str, ...] = ROOTS) -> list[RunGroup]:
+    """Every (task, algo) group of runs in these trees, read with the report's own reader
+    (which refuses a seed exported to two of them)."""
+    return group_runs([run for root in roots for run in find_runs(RESULTS / root)])
+
+
+def status(tasks: list[str], complete: list[str]) -> str:
+    """The section's status line. `sweep=table1` runs every task the evidence
+    (results/safe_sound) does not, both algos, every seed."""
+    evidence = {g.task for g in exported_groups(ROOTS[:1])}
+    planned = len(ALGOS) * len(SEEDS) * len([task for task in tasks if task not in evidence])
+    exported = sum(len(g.finished) for g in exported_groups(ROOTS[1:]))
+    return (
+        f"{STATUS}{len(complete)} of {len(tasks)} tasks are complete; {exported} of the "
+        f"{planned} `sweep=table1` runs are exported.**"
+    )
 
 
 def paper(task: str, algo: str) -> str:
@@ -127,6 +142,9 @@ def main() -> None:
         for task in tasks
         if all(sorted(finals[task, algo]) == list(SEEDS) for algo in ALGOS.values())
     ]
+    section = "\n".join(
+        status(tasks, complete) if line.startswith(STATUS) else line for line in section.split("\n")
+    )
     section = replace_table(section, TABLE_HEADER, table)
     paired_rows = [
         f"| {task} | {policy} | {paired(finals[task, 's3rl'], finals[task, 'sac_lag'], policy)} |"

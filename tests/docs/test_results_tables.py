@@ -312,6 +312,26 @@ def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
         assert iqm == f"{s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()}"
 
 
+def test_table1_status_line_counts_the_exported_runs():
+    # Counted from the files: the tasks the evidence tree has no run of are the ones
+    # sweep=table1 runs, both algos, three seeds each.
+    section = DOC.read_text().split(TABLE1_SECTION, 1)[1]
+    tasks = [row[0] for row in TABLE1 if row[1] == "S3RL"]
+    evidence = {
+        group.name.removeprefix("sac_lag_").removeprefix("s3rl_")
+        for group in (RESULTS / "safe_sound").iterdir()
+        if any(group.glob("seed*/final_eval.json"))
+    }
+    table1 = list((RESULTS / "table1").glob("*/seed*/final_eval.json"))
+    planned = 2 * len(SEEDS) * len(set(tasks) - evidence)
+    assert planned == 54
+    line = (
+        f"**Where it stands: {len(complete_tasks())} of {len(tasks)} tasks are complete; "
+        f"{len(table1)} of the {planned} `sweep=table1` runs are exported.**"
+    )
+    assert line in section.splitlines()
+
+
 @pytest.fixture(scope="module")
 def update_table1():
     """docs/update_table1.py (make report runs it; not a package module) as a module."""
@@ -329,14 +349,19 @@ def update_table1():
 def test_update_table1_rewrites_the_committed_tables_unchanged(
     update_table1, tmp_path, monkeypatch
 ):
-    # The script writes the tables the tests above check; on the committed runs it must give
-    # back the committed doc, and a stale row must be rewritten.
+    # The script writes the tables and the status line the tests above check; on the committed
+    # runs it must give back the committed doc, and a stale row and status must be rewritten.
     committed = DOC.read_text()
     row = next(
         line for line in committed.splitlines() if line.startswith("| SafetyCarRun-v0 | S3RL")
     )
+    status = next(line for line in committed.splitlines() if line.startswith("**Where it stands:"))
     stale = tmp_path / "results.md"
-    stale.write_text(committed.replace(row, row.replace("554.00", "1.00")))
+    stale.write_text(
+        committed.replace(row, row.replace("554.00", "1.00")).replace(
+            status, "**Where it stands: 0 of 16 tasks are complete.**"
+        )
+    )
     monkeypatch.setattr(update_table1, "DOC", stale)
     update_table1.main()
     assert stale.read_text() == committed
