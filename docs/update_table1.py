@@ -4,7 +4,7 @@
 
 The section's status line (how many tasks are complete, how many of `sweep=table1`'s runs are
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
-best-feasible checkpoint, mean over seeds), the paired tests of the complete tasks (scipy's
+best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the complete tasks (scipy's
 `ttest_rel` over seeds, S3RL minus SAC-Lag) and rliable's aggregate over the complete tasks are
 recomputed from the runs exported to results/safe_sound and results/table1 and from the paper's
 file; the prose around them is left as written (it says what the numbers mean, so reread it
@@ -31,6 +31,7 @@ ROOTS = ("safe_sound", "table1")
 SECTION = "## Table 1 in full: sixteen tasks under `experiment=safe`"
 TABLE_HEADER = "| task | algo | seeds | paper: reward / cost |"
 PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
+PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
@@ -72,6 +73,16 @@ def ours(found: dict[int, dict], policy: str) -> str:
     reward = statistics.mean(f["reward_mean"] for f in final)
     cost = statistics.mean(f["cost_mean"] for f in final)
     return f"{reward:.2f} / {cost:.2f}"
+
+
+def per_seed(found: dict[int, dict]) -> str:
+    """Each seed's last policy (its mean over the final episodes), "pending" where not run."""
+    return " | ".join(
+        f"{found[seed]['reward_mean']:.1f} / {found[seed]['cost_mean']:.1f}"
+        if seed in found
+        else "pending"
+        for seed in SEEDS
+    )
 
 
 def paired(s3rl: dict[int, dict], sac_lag: dict[int, dict], policy: str) -> str:
@@ -152,6 +163,13 @@ def main() -> None:
         for policy in POLICIES
     ]
     section = replace_table(section, PAIRED_HEADER, paired_rows)
+    seed_rows = [
+        f"| {task} | {name} | {per_seed(finals[task, algo])} |"
+        for task in tasks
+        for name, algo in ALGOS.items()
+        if any(finals[task, a] for a in ALGOS.values())
+    ]
+    section = replace_table(section, PER_SEED_HEADER, seed_rows)
     section = replace_table(section, ANSWER_HEADER, answer(groups, complete))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")

@@ -289,6 +289,30 @@ def test_table1_paired_test_matches_scipy(row):
 
 
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
+PER_SEED = section_table(TABLE1_SECTION, PER_SEED_HEADER)
+
+
+def test_table1_per_seed_rows_cover_the_tasks_with_a_finished_run():
+    started = [
+        (task, algo)
+        for task, algo, *_ in TABLE1
+        if table1_runs(task, "s3rl") or table1_runs(task, "sac_lag")
+    ]
+    assert [(row[0], row[1]) for row in PER_SEED] == started
+
+
+@pytest.mark.parametrize("row", PER_SEED, ids=lambda row: f"{row[0]}-{row[1]}")
+def test_table1_per_seed_row_is_each_runs_last_policy(row):
+    task, algo, *cells = row
+    runs = table1_runs(task, ALGOS[algo])
+    for seed, cell in zip(SEEDS, cells, strict=True):
+        if seed not in runs:
+            assert cell == "pending"
+            continue
+        reward, cost = numbers(cell)
+        assert close(reward, runs[seed]["reward_mean"]), f"{task} {seed} {cell}"
+        assert close(cost, runs[seed]["cost_mean"]), f"{task} {seed} {cell}"
 
 
 def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
