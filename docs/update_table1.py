@@ -22,7 +22,7 @@ from scipy.stats import ttest_rel
 
 from s3rl_torchrl.report.aggregate import aggregate
 from s3rl_torchrl.report.paper import paper_results_for
-from s3rl_torchrl.report.runs import RunGroup, find_runs, group_runs
+from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
@@ -39,18 +39,17 @@ SEEDS = (10, 20, 30)
 POLICIES = {"last": lambda final: final, "best-feasible": lambda final: final["best_feasible"]}
 
 
-def exported_groups(roots: tuple[str, ...] = ROOTS) -> list[RunGroup]:
-    """Every (task, algo) group of runs in these trees, read with the report's own reader
-    (which refuses a seed exported to two of them)."""
-    return group_runs([run for root in roots for run in find_runs(RESULTS / root)])
+def exported_runs() -> dict[str, list[Run]]:
+    """Every run exported to each tree, read once with the report's own reader."""
+    return {root: find_runs(RESULTS / root) for root in ROOTS}
 
 
-def status(tasks: list[str], complete: list[str]) -> str:
+def status(tasks: list[str], complete: list[str], runs: dict[str, list[Run]]) -> str:
     """The section's status line. `sweep=table1` runs every task the evidence
     (results/safe_sound) does not, both algos, every seed."""
-    evidence = {g.task for g in exported_groups(ROOTS[:1])}
+    evidence = {run.task for run in runs["safe_sound"]}
     planned = len(ALGOS) * len(SEEDS) * len([task for task in tasks if task not in evidence])
-    exported = sum(len(g.finished) for g in exported_groups(ROOTS[1:]))
+    exported = sum(run.finished for run in runs["table1"])
     return (
         f"{STATUS}{len(complete)} of {len(tasks)} tasks are complete; {exported} of the "
         f"{planned} `sweep=table1` runs are exported.**"
@@ -137,7 +136,9 @@ def main() -> None:
     lines = section.splitlines()
     start, end = table_body(lines, TABLE_HEADER)
     tasks = list(dict.fromkeys(line.split("|")[1].strip() for line in lines[start:end]))
-    groups = exported_groups()
+    runs = exported_runs()
+    # One grouping of both trees: group_runs refuses a seed exported to both.
+    groups = group_runs([run for found in runs.values() for run in found])
     finals = {(g.task, g.algo): {run.seed: run.final for run in g.finished} for g in groups}
     for task in tasks:
         for algo in ALGOS.values():
@@ -154,7 +155,8 @@ def main() -> None:
         if all(sorted(finals[task, algo]) == list(SEEDS) for algo in ALGOS.values())
     ]
     section = "\n".join(
-        status(tasks, complete) if line.startswith(STATUS) else line for line in section.split("\n")
+        status(tasks, complete, runs) if line.startswith(STATUS) else line
+        for line in section.split("\n")
     )
     section = replace_table(section, TABLE_HEADER, table)
     paired_rows = [
