@@ -5,8 +5,8 @@
 The section's status line (how many tasks are complete, how many of `sweep=table1`'s runs are
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
 best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
-complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag) and rliable's aggregate over
-the complete tasks are recomputed from the runs exported to results/safe_sound and results/table1
+complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
+the complete tasks and the counts its cost profiles are read by are recomputed from the runs exported to results/safe_sound and results/table1
 and from the paper's file; the prose around them is left as written (it says what the numbers
 mean, so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
@@ -20,9 +20,9 @@ from pathlib import Path
 
 from scipy.stats import ttest_rel
 
-from s3rl_torchrl.report.aggregate import aggregate
+from s3rl_torchrl.report.aggregate import Aggregate, aggregate
 from s3rl_torchrl.report.paper import paper_results_for
-from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
+from s3rl_torchrl.report.runs import Run, find_runs, group_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
@@ -33,6 +33,10 @@ TABLE_HEADER = "| task | algo | seeds | paper: reward / cost |"
 PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
+# The cost / limit thresholds the profile counts are read at: zero cost, a fifth and half of the
+# limit, the limit (the share within it), twice the limit.
+PROFILE_THRESHOLDS = (0.0, 0.2, 0.5, 1.0, 2.0)
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
@@ -96,10 +100,9 @@ def paired(s3rl: dict[int, dict], sac_lag: dict[int, dict], policy: str) -> str:
     return " | ".join(cells)
 
 
-def answer(groups: list[RunGroup], complete: list[str]) -> list[str]:
-    """rliable's aggregate over the complete tasks' runs alone (the report's defaults: 2000
+def answer(result: Aggregate) -> list[str]:
+    """rliable's aggregate (over the complete tasks' runs alone, the report's defaults: 2000
     resamples, seed 0), one row per protocol: the doc quotes it until all sixteen are in."""
-    result = aggregate([g for g in groups if g.task in set(complete)], "s3rl")
     rows = []
     for read in result.protocols:
         (pair,) = read.pairs
@@ -109,6 +112,24 @@ def answer(groups: list[RunGroup], complete: list[str]) -> list[str]:
             f"| {read.protocol.replace('_', '-')} | {pair.cost.cell()} | {pair.reward.cell()} "
             f"| {within} | {s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()} |"
         )
+    return rows
+
+
+def profile_counts(result: Aggregate) -> list[str]:
+    """The cost profiles of the same runs as counts: per protocol and algo, how many runs have
+    cost / limit at or below each threshold (the figure's right column, read at a few points)."""
+    names = {algo: name for name, algo in ALGOS.items()}
+    rows = []
+    for read in result.protocols:
+        for row in read.algos:
+            _, ratio = read.profile_data[row.label]
+            pooled = [float(value) for values in ratio.values() for value in values]
+            cells = [
+                f"{sum(value <= threshold for value in pooled)} of {len(pooled)}"
+                for threshold in PROFILE_THRESHOLDS
+            ]
+            protocol = read.protocol.replace("_", "-")
+            rows.append(f"| {protocol} | {names[row.label]} | " + " | ".join(cells) + " |")
     return rows
 
 
@@ -172,7 +193,9 @@ def main() -> None:
         if any(finals[task, a] for a in ALGOS.values())
     ]
     section = replace_table(section, PER_SEED_HEADER, seed_rows)
-    section = replace_table(section, ANSWER_HEADER, answer(groups, complete))
+    result = aggregate([g for g in groups if g.task in set(complete)], "s3rl")
+    section = replace_table(section, ANSWER_HEADER, answer(result))
+    section = replace_table(section, PROFILE_HEADER, profile_counts(result))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")
 

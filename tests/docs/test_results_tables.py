@@ -8,7 +8,8 @@ them: the sound preset's evidence (results/safe_sound, every column), Hopper's f
 under the max read of the cost pair, before selection round 5 (results/safe_sound_hopper_max,
 every column), the previous preset's (results/safe, the final evaluation's columns), and Table 1
 in full (results/safe_sound with results/table1 beside the paper's file: the sixteen tasks'
-rows, the paired tests over seeds and rliable's aggregate over the complete tasks).
+rows, the paired tests over seeds, rliable's aggregate over the complete tasks and the counts of
+its cost profiles).
 """
 
 from __future__ import annotations
@@ -334,6 +335,38 @@ def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
         s3rl, sac_lag = read.algos
         assert within == " / ".join("{} of {}".format(*row.within_count) for row in (s3rl, sac_lag))
         assert iqm == f"{s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()}"
+
+
+PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
+PROFILE = section_table(TABLE1_SECTION, PROFILE_HEADER)
+
+
+def table1_cost_limit(task: str, algo: str) -> float:
+    """The cost limit the exported runs of (task, algo) trained and were judged at."""
+    (limit,) = {
+        json.loads(path.read_text())["task"]["cost_limit"]
+        for root in TABLE1_ROOTS
+        for path in (RESULTS / root / f"{algo}_{task}").glob("seed*/config.json")
+    }
+    return limit
+
+
+def test_table1_cost_profile_counts_are_the_complete_tasks_runs():
+    # Counted by hand from each run's final evaluation and its config's limit: how many of an
+    # algo's runs over the complete tasks have cost / limit at or below 0, 0.2, 0.5, 1 and 2.
+    complete = complete_tasks()
+    expected = []
+    for policy, final in (("last", lambda r: r), ("best-feasible", lambda r: r["best_feasible"])):
+        for name, algo in ALGOS.items():
+            ratios = [
+                final(run)["cost_mean"] / table1_cost_limit(task, algo)
+                for task in complete
+                for run in table1_runs(task, algo).values()
+            ]
+            assert len(ratios) == len(SEEDS) * len(complete)
+            counts = [sum(r <= t for r in ratios) for t in (0.0, 0.2, 0.5, 1.0, 2.0)]
+            expected.append([policy, name, *(f"{n} of {len(ratios)}" for n in counts)])
+    assert PROFILE == expected
 
 
 def test_table1_status_line_counts_the_exported_runs():
