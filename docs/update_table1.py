@@ -6,9 +6,9 @@ The section's status line (how many tasks are complete, how many of `sweep=table
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
 best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
 complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
-the complete tasks and the counts its cost profiles are read by are recomputed from the runs exported to results/safe_sound and results/table1
-and from the paper's file; the prose around them is left as written (it says what the numbers
-mean, so reread it after a change).
+the complete tasks and the counts of its cost profiles are recomputed from the runs exported to
+results/safe_sound and results/table1 and from the paper's file; the prose around them is left
+as written (it says what the numbers mean, so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """
 

@@ -352,7 +352,7 @@ def table1_cost_limit(task: str, algo: str) -> float:
 
 
 def test_table1_cost_profile_counts_are_the_complete_tasks_runs():
-    # Counted by hand from each run's final evaluation and its config's limit: how many of an
+    # Counted here from each run's final evaluation and its config's limit: how many of an
     # algo's runs over the complete tasks have cost / limit at or below 0, 0.2, 0.5, 1 and 2.
     complete = complete_tasks()
     expected = []
