@@ -13,6 +13,7 @@ import pytest
 import torch
 
 from s3rl_torchrl.envs import BULLET_TASKS, get_task, make_env, task_names
+from tests.envs._policies import ReplayActions
 
 pytest.importorskip("pybullet")  # the `bullet` extra; `make setup` installs it
 
@@ -108,16 +109,6 @@ def _plain_rollout(env_id: str, actions: np.ndarray, seed: int) -> dict[str, np.
             obs, _ = env.reset()
     env.close()
     return {k: np.asarray(v) for k, v in out.items()}
-
-
-class ReplayActions:
-    def __init__(self, actions: np.ndarray):
-        self.actions, self.t = torch.as_tensor(actions), 0
-
-    def __call__(self, td):
-        td["action"] = self.actions[self.t]
-        self.t += 1
-        return td
 
 
 # BallRun runs past its 100-step time limit (truncation and the reset after it); the others

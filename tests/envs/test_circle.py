@@ -20,6 +20,7 @@ from torchrl.envs import DoubleToFloat, GymEnv, TransformedEnv, default_info_dic
 
 import s3rl_torchrl  # noqa: F401  (registers the tasks)
 from s3rl_torchrl.envs import TASKS, get_task, make_env, task_names
+from tests.envs._policies import ReplayActions
 
 RADIUS, FACTOR, WALL, MAX_DIST, BINS = 1.5, 0.1, 1.125, 6.0, 16
 OBS_DIM = {"Point": 28, "Car": 40}
@@ -216,16 +217,6 @@ def test_time_limit_truncates_at_500_steps():
         _, _, terminated, truncated, _ = env.step(np.zeros(2))
         assert not terminated
         assert truncated == (t == 500)
-
-
-class ReplayActions:
-    def __init__(self, actions):
-        self.actions, self.t = actions, 0
-
-    def __call__(self, td):
-        td["action"] = self.actions[self.t]
-        self.t += 1
-        return td
 
 
 @pytest.mark.parametrize("task", [i for ids in IDS.values() for i in ids])

@@ -21,6 +21,7 @@ from torchrl.envs import DoubleToFloat, GymEnv, TransformedEnv, default_info_dic
 import s3rl_torchrl  # noqa: F401  (registers the tasks)
 from s3rl_torchrl.envs import get_task, make_env, task_names
 from s3rl_torchrl.envs.goal import goal_lidars, hazard_cost
+from tests.envs._policies import ReplayActions
 
 MAIN_ID, PAPER_ID = "SafetyPointGoal1-v0", "SafetyPointGoal1Gymnasium-v0"
 ORACLE = np.load(Path(__file__).resolve().parents[1] / "data" / "pointgoal1" / "oracle.npz")
@@ -410,16 +411,6 @@ def test_time_limit_truncates_at_1000_steps():
 
 
 # -- TorchRL -------------------------------------------------------------------------------------
-class ReplayActions:
-    def __init__(self, actions):
-        self.actions, self.t = actions, 0
-
-    def __call__(self, td):
-        td["action"] = self.actions[self.t]
-        self.t += 1
-        return td
-
-
 @pytest.mark.parametrize("task", [MAIN_ID, PAPER_ID])
 def test_make_env_matches_the_gymnasium_env(task):
     # make_env against torchrl's plain GymEnv over the same Gymnasium id (whose rules are checked

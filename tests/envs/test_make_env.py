@@ -9,6 +9,7 @@ from torchrl.envs import DoubleToFloat, GymEnv, TransformedEnv, default_info_dic
 from torchrl.envs.utils import check_env_specs
 
 from s3rl_torchrl.envs import VELOCITY_REGISTRATIONS, get_task, make_env, task_names
+from tests.envs._policies import ReplayActions
 
 
 # Every task of every family, v5 variants included (aliases build the same envs).
@@ -43,18 +44,6 @@ def test_step_keys_shapes_and_dtypes():
         assert ("next", key) in td.keys(True), key
     assert td["next", "step_count"].squeeze(-1).tolist() == [1, 2, 3, 4]
     torch.testing.assert_close(td["next", "episode_reward"], td["next", "reward"].cumsum(0))
-
-
-class ReplayActions:
-    """A policy that plays a fixed action sequence, so two envs can be stepped identically."""
-
-    def __init__(self, actions: torch.Tensor):
-        self.actions, self.t = actions, 0
-
-    def __call__(self, td):
-        td["action"] = self.actions[self.t]
-        self.t += 1
-        return td
 
 
 def test_matches_plain_gymnasium_v4_and_threshold_rule():
