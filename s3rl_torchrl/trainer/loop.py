@@ -84,7 +84,7 @@ from s3rl_torchrl.trainer.evaluation import (
     format_table,
 )
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
-from s3rl_torchrl.trainer.resume import RESUME_LOCKED
+from s3rl_torchrl.trainer.resume import RESUME_LOCKED, config_changes
 from s3rl_torchrl.trainer.run_lock import RunLock
 
 FINAL_EVAL_FILE = "final_eval.json"
@@ -708,7 +708,7 @@ def record_resume(
     history = json.loads(path.read_text()).get("resumes", []) if path.is_file() else []
     changed = {
         key: [before, after]
-        for key, (before, after) in _flat_differences(saved, current).items()
+        for key, (before, after) in config_changes(saved, current).items()
         if key != "resume"
     }
     entry: dict[str, Any] = {"frames": counters.frames, "changed": changed, "exact": inexact is None}
@@ -719,17 +719,6 @@ def record_resume(
     final = run_dir / FINAL_EVAL_FILE
     if final.is_file() and current["collector"]["total_frames"] > counters.frames:
         final.rename(run_dir / f"final_eval_{counters.frames}.json")
-
-
-def _flat_differences(before: dict, after: dict, prefix: str = "") -> dict[str, tuple]:
-    out = {}
-    for key in sorted(set(before) | set(after)):
-        a, b = before.get(key), after.get(key)
-        if isinstance(a, dict) and isinstance(b, dict):
-            out.update(_flat_differences(a, b, f"{prefix}{key}."))
-        elif a != b:
-            out[f"{prefix}{key}"] = (a, b)
-    return out
 
 
 def train(

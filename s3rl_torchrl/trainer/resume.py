@@ -78,12 +78,13 @@ def _get(cfg: dict, dotted: str) -> Any:
     return cfg
 
 
-def _changes(before: dict, after: dict, prefix: str = "") -> dict[str, tuple[Any, Any]]:
+def config_changes(before: dict, after: dict, prefix: str = "") -> dict[str, tuple[Any, Any]]:
+    """The leaves of two nested configs that differ, by dotted key: ``{key: (before, after)}``."""
     out = {}
     for key in sorted(set(before) | set(after)):
         a, b = before.get(key), after.get(key)
         if isinstance(a, dict) and isinstance(b, dict):
-            out.update(_changes(a, b, f"{prefix}{key}."))
+            out.update(config_changes(a, b, f"{prefix}{key}."))
         elif a != b:
             out[f"{prefix}{key}"] = (a, b)
     return out
@@ -128,7 +129,7 @@ def resume_config(
             "(train a new run instead):\n  " + "\n  ".join(locked)
         )
     if echo:
-        for key, (old, new) in _changes(before, current).items():
+        for key, (old, new) in config_changes(before, current).items():
             if key == "resume":
                 continue
             what = "the cost limit (lambda's target from here on)" if key == "task.cost_limit" else key
