@@ -360,7 +360,7 @@ def test_table1_cost_profile_counts_are_the_complete_tasks_runs():
     for task in complete:
         for algo in ALGOS.values():
             limit = table1_cost_limit(task, algo)
-            runs[algo] += [(final, limit) for final in table1_runs(task, algo).values()]
+            runs[algo] += [(evaluation, limit) for evaluation in table1_runs(task, algo).values()]
     expected = []
     for policy, final in (("last", lambda r: r), ("best-feasible", lambda r: r["best_feasible"])):
         for name, algo in ALGOS.items():
