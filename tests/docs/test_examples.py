@@ -14,6 +14,23 @@ from s3rl_torchrl.data import SafeUnsafeSampler
 from s3rl_torchrl.transforms import make_nstep_transform
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "objectives.md"
+
+
+def run_example(doc: Path, heading: str, shrink: list[tuple[str, str]]) -> dict:
+    """Runs the first python block after ``heading`` in ``doc``, with each (as written, smaller)
+    replacement of ``shrink`` made, and returns the names it defined. A replacement whose text is
+    no longer in the block fails the test: the docs changed, so the shrink list must too."""
+    section = doc.read_text().split(heading, 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    for written, small in shrink:
+        assert written in code, f"the docs example no longer contains {written!r}"
+        code = code.replace(written, small)
+    torch.manual_seed(0)
+    namespace: dict = {}
+    exec(compile(code, str(doc), "exec"), namespace)
+    return namespace
+
+
 # (as written in the docs, what the test runs instead): a few hundred frames, seconds.
 SHRINK = [
     ("num_envs=10", "num_envs=2"),
@@ -24,20 +41,8 @@ SHRINK = [
 ]
 
 
-def own_loop_example() -> str:
-    text = DOC.read_text()
-    section = text.split("## In your own TorchRL loop", 1)[1]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
-
-
 def test_own_loop_example_runs():
-    code = own_loop_example()
-    for written, small in SHRINK:
-        assert written in code, f"the docs example no longer contains {written!r}"
-        code = code.replace(written, small)
-    torch.manual_seed(0)
-    namespace: dict = {}
-    exec(compile(code, str(DOC), "exec"), namespace)
+    namespace = run_example(DOC, "## In your own TorchRL loop", SHRINK)
     loss, metrics = namespace["loss"], namespace["metrics"]
     # It trained: gradient steps ran and moved the targets off their initial copy.
     assert set(metrics.keys()) >= {"loss_actor", "loss_qvalue", "loss_cost_qvalue", "lagrangian"}
@@ -58,19 +63,10 @@ BASELINES_SHRINK = [
 ]
 
 
-def baselines_loop_example() -> str:
-    section = DOC.read_text().split("### DDPG-Lag and PPO-Lag in your own TorchRL loop", 1)[1]
-    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
-
-
 def test_ddpg_lag_and_ppo_lag_loop_example_runs():
-    code = baselines_loop_example()
-    for written, small in BASELINES_SHRINK:
-        assert written in code, f"the docs example no longer contains {written!r}"
-        code = code.replace(written, small)
-    torch.manual_seed(0)
-    namespace: dict = {}
-    exec(compile(code, str(DOC), "exec"), namespace)
+    namespace = run_example(
+        DOC, "### DDPG-Lag and PPO-Lag in your own TorchRL loop", BASELINES_SHRINK
+    )
     ddpg_loss, metrics = namespace["loss"], namespace["metrics"]
     assert {"loss_actor", "loss_value", "loss_cost_value", "lagrangian"} <= set(metrics.keys())
     assert all(torch.isfinite(v).all() for v in metrics.values())
@@ -107,14 +103,7 @@ ANY_ACTOR_SHRINK = [
 
 def test_contrastive_phase_on_ddpg_lag_example_runs():
     """docs/representation.md, "Any actor": the S3RL encoder phase wired into DDPG-Lag."""
-    section = REPRESENTATION_DOC.read_text().split("### Any actor", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    for written, small in ANY_ACTOR_SHRINK:
-        assert written in code, f"the docs example no longer contains {written!r}"
-        code = code.replace(written, small)
-    torch.manual_seed(0)
-    namespace: dict = {}
-    exec(compile(code, str(REPRESENTATION_DOC), "exec"), namespace)
+    namespace = run_example(REPRESENTATION_DOC, "### Any actor", ANY_ACTOR_SHRINK)
     phase, metrics = namespace["phase"], namespace["metrics"]
     # The loop called the phase (it runs or skips depending on the safe/unsafe counts; that it
     # trains the DDPG actor's encoder is tested in tests/objectives/test_ddpg_lag.py).
@@ -141,14 +130,7 @@ ONE_STORAGE_SHRINK = [
 def test_one_storage_example_runs():
     """The page's first loop runs as written: an n-step buffer extended with the collector's
     unflattened batches, RL batches and contrastive phases from one storage."""
-    section = REPRESENTATION_DOC.read_text().split("## One storage, RL batches", 1)[1]
-    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
-    for written, small in ONE_STORAGE_SHRINK:
-        assert written in code, f"the docs example no longer contains {written!r}"
-        code = code.replace(written, small)
-    torch.manual_seed(0)
-    namespace: dict = {}
-    exec(compile(code, str(REPRESENTATION_DOC), "exec"), namespace)
+    namespace = run_example(REPRESENTATION_DOC, "## One storage, RL batches", ONE_STORAGE_SHRINK)
     rb, phase, grad_steps = namespace["rb"], namespace["phase"], namespace["grad_steps"]
     # 300 frames on 2 env copies: the 2-step transform builds each copy's windows along its 150
     # steps and holds back its last 2 frames, so 2 x 148 transitions are stored (a flattened
