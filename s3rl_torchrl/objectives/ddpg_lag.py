@@ -34,6 +34,10 @@ from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["DDPGLagLoss"]
 
+# What DDPGLoss clears the weak references of, and the cost critic's.
+_NETWORKS = ("actor", "value", "cost_value")
+_PARAMETER_CONTAINERS = [f"{t}{n}_network_params" for t in ("", "target_") for n in _NETWORKS]
+
 
 class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):
     r"""DDPG with Lagrangian cost penalties (FSRL's DDPG-Lag), TensorDict-native.
@@ -268,16 +272,7 @@ class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):
             "reward_q": q_reward.detach().mean(),
             "cost_q": q_cost.detach().reshape(-1, self.num_costs).mean(0),
         }
-        self._clear_weakrefs(
-            tensordict,
-            loss_actor,
-            "value_network_params",
-            "cost_value_network_params",
-            "target_value_network_params",
-            "target_cost_value_network_params",
-            "target_actor_network_params",
-            "actor_network_params",
-        )
+        self._clear_weakrefs(tensordict, loss_actor, *_PARAMETER_CONTAINERS)
         return loss_actor, metadata
 
     @dispatch
@@ -296,14 +291,5 @@ class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):
             },
             batch_size=[],
         )
-        self._clear_weakrefs(
-            tensordict,
-            td_out,
-            "value_network_params",
-            "cost_value_network_params",
-            "target_value_network_params",
-            "target_cost_value_network_params",
-            "target_actor_network_params",
-            "actor_network_params",
-        )
+        self._clear_weakrefs(tensordict, td_out, *_PARAMETER_CONTAINERS)
         return td_out
