@@ -22,6 +22,12 @@ def detached(params: TensorDictBase) -> TensorDictBase:
     return params.apply(Tensor.detach, filter_empty=True)
 
 
+def parameter_containers(*networks: str) -> tuple[str, ...]:
+    """The attribute names ``convert_to_functional`` gives the parameters (and target
+    parameters) of ``networks``: what a loss's forward passes to ``_clear_weakrefs``."""
+    return tuple(f"{prefix}{name}_network_params" for prefix in ("", "target_") for name in networks)
+
+
 def check_arguments(networks: dict, counts: dict, choices: dict, alpha_init: float) -> None:
     """Constructor arguments: ``networks`` name -> (module or list, the critics it holds),
     ``counts`` name -> (value, lowest allowed), ``choices`` name -> (value, allowed values)."""

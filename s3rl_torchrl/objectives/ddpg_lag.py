@@ -30,13 +30,13 @@ from torchrl.objectives import DDPGLoss
 from torchrl.objectives.utils import ValueEstimators, _cache_values, distance_loss
 
 from s3rl_torchrl.objectives._common import next_key as _next
+from s3rl_torchrl.objectives._common import parameter_containers
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
 __all__ = ["DDPGLagLoss"]
 
 # What DDPGLoss clears the weak references of, and the cost critic's.
-_NETWORKS = ("actor", "value", "cost_value")
-_PARAMETER_CONTAINERS = [f"{t}{n}_network_params" for t in ("", "target_") for n in _NETWORKS]
+_PARAMETER_CONTAINERS = parameter_containers("actor", "value", "cost_value")
 
 
 class DDPGLagLoss(LagrangianBufferMixin, DDPGLoss):

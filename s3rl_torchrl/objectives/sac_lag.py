@@ -38,7 +38,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from torchrl.objectives.sac import SACLoss, compute_rsample_log_prob
 from torchrl.objectives.utils import ValueEstimators, _cache_values, _vmap_func, distance_loss
 
-from s3rl_torchrl.objectives._common import check_arguments, detached
+from s3rl_torchrl.objectives._common import check_arguments, detached, parameter_containers
 from s3rl_torchrl.objectives._common import next_key as _next
 from s3rl_torchrl.objectives._lagrangian_buffer import LagrangianBufferMixin
 
@@ -49,8 +49,7 @@ _LOSS_FUNCTIONS = ("l2", "l1", "smooth_l1")
 #: pessimistic ``max`` (CAL's reading of a cost ensemble through an upper bound), or the ``mean``.
 COST_CRITIC_READS = ("min", "max", "mean")
 # What SACLoss.forward clears the weak references of, and the cost critics'.
-_NETWORKS = ("actor", "qvalue", "cost_qvalue")
-_PARAMETER_CONTAINERS = [f"{t}{n}_network_params" for t in ("", "target_") for n in _NETWORKS]
+_PARAMETER_CONTAINERS = parameter_containers("actor", "qvalue", "cost_qvalue")
 
 
 class SACLagLoss(LagrangianBufferMixin, SACLoss):
