@@ -14,7 +14,10 @@ targets read the deterministic evaluation), the mean
 (``logger=csv``, the default), between consecutive lambda updates; the mean evaluation and
 training reward and cost; the lag-1 autocorrelation of the training cost (what the controller
 is fed; about -1 in a period-2 cycle); the mean evaluation reward and cost over the last 20% of
-epochs; the final evaluation if there is one. Runs are grouped by task, algo and controller
+epochs; the final evaluation if there is one. Where the multiplier lets go: the lowest lambda,
+the share of epochs that end with lambda below ``LAMBDA_NEAR_ZERO`` (0.05) and the share of those
+whose evaluation is over the limit, and the mean evaluation reward of the epochs over the limit
+and of those within it. Runs are grouped by task, algo and controller
 setting (read from each run's ``config.json``) and the means and standard deviations over seeds
 written to ``--out`` with the command that made them. ``--csv-dir`` copies each run's
 ``metrics.csv`` (a few kB) there as ``<task>/[<algo>/]<setting>/seed<seed>.csv`` (the setting's
@@ -70,6 +73,11 @@ METRICS = (
     "mean_abs_dlambda_epoch",
     "mean_abs_dlambda_update",
     "lambda_mean",
+    "lambda_min",
+    "lambda_near_zero",
+    "eval_cost_over_limit_near_zero",
+    "eval_reward_over_limit",
+    "eval_reward_within_limit",
     "eval_reward",
     "eval_cost",
     "train_reward",
@@ -84,6 +92,10 @@ METRICS = (
     "final_reward",
     "final_cost",
 )
+
+
+#: Below this the multiplier counts as released: the policy's loss is then about SAC's.
+LAMBDA_NEAR_ZERO = 0.05
 
 
 def _float(value: str | None) -> float:
@@ -211,6 +223,9 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         return hits / len(pairs) if pairs else math.nan
 
     lams = col["lagrangian"]
+    known = [lam for lam in lams if not math.isnan(lam)]
+    evals = [(lam, r, c) for lam, r, c in zip(lams, col["eval/reward"], col["eval/cost"])
+             if not math.isnan(c)]
     lambda_peak, peak_frames = max(
         ((_float(r.get("lagrangian")), f) for r, f in zip(rows, frames)),
         key=lambda pair: -math.inf if math.isnan(pair[0]) else pair[0],
@@ -235,6 +250,16 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "mean_abs_dlambda_epoch": _mean([abs(b - a) for a, b in zip(lams, lams[1:])]),
         "mean_abs_dlambda_update": _mean([abs(b - a) for a, b in zip(updates, updates[1:])]),
         "lambda_mean": _mean(lams),
+        # Whether the evaluations over the limit come where the multiplier has let go (a cycle
+        # that takes lambda back to about 0), and what they earn beside those within it.
+        "lambda_min": min(known, default=math.nan),
+        "lambda_near_zero": (sum(lam < LAMBDA_NEAR_ZERO for lam in known) / len(known)
+                             if known else math.nan),
+        "eval_cost_over_limit_near_zero": over(
+            [c for lam, _, c in evals if lam < LAMBDA_NEAR_ZERO]
+        ),
+        "eval_reward_over_limit": _mean([r for _, r, c in evals if c > limit]),
+        "eval_reward_within_limit": _mean([r for _, r, c in evals if c <= limit]),
         "eval_reward": _mean(col["eval/reward"]),
         "eval_cost": _mean(col["eval/cost"]),
         "train_reward": _mean(col["train/reward"]),

@@ -229,3 +229,29 @@ def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
     config["algo"]["cost_nonnegative"] = False
     assert "critic(read=mean)" in ld.setting_name(config)
 
+
+
+def test_where_the_multiplier_lets_go_by_hand(tmp_path):
+    # frames, epoch, train reward, train cost, lambda, eval reward, eval cost; limit 10.
+    rows = [
+        [20000, 1, 0.0, 0.0, 3.0, 100.0, 50.0],
+        [40000, 2, 0.0, 0.0, 2.0, 100.0, 50.0],  # first half: frames <= 60000
+        [60000, 3, 0.0, 0.0, 0.0, 100.0, 0.0],
+        [80000, 4, 0.0, 12.0, 0.01, 40.0, 30.0],  # released, over the limit
+        [100000, 5, 0.0, 5.0, 0.04, 20.0, 10.0],  # released, at the limit: within
+        [120000, 6, 0.0, 8.0, 0.8, 30.0, 0.0],
+        [140000, 7, 0.0, 11.0, 0.05, 60.0, 12.0],  # 0.05 is not below 0.05
+    ]
+    s = ld.summarise_run(fake_run(tmp_path, 10, rows, []))
+    assert s["epochs_second_half"] == 4  # frames > 70000
+    assert s["lambda_min"] == 0.01
+    assert s["lambda_near_zero"] == pytest.approx(2 / 4)
+    assert s["eval_cost_over_limit_near_zero"] == pytest.approx(1 / 2)
+    assert s["eval_reward_over_limit"] == pytest.approx((40.0 + 60.0) / 2)
+    assert s["eval_reward_within_limit"] == pytest.approx((20.0 + 30.0) / 2)
+
+    # Never released: no epoch to read an overshoot from.
+    held = [r[:4] + [1.0] + r[5:] for r in rows]
+    s = ld.summarise_run(fake_run(tmp_path, 20, held, []))
+    assert (s["lambda_min"], s["lambda_near_zero"]) == (1.0, 0.0)
+    assert math.isnan(s["eval_cost_over_limit_near_zero"])
