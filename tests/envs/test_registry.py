@@ -92,6 +92,8 @@ def test_docs_table_is_the_registry():
 
 
 @pytest.mark.parametrize("missing", [("bullet_safety_gym", "pybullet"), ("pybullet",)])
+# Re-importing bullet_safety_gym (the second case) registers its gymnasium ids a second time.
+@pytest.mark.filterwarnings("ignore:.*Overriding environment:UserWarning")
 def test_package_imports_without_the_bullet_packages(missing, monkeypatch):
     # A fresh import of this package with the optional packages unimportable.
     for name in [m for m in sys.modules if m.split(".")[0] in ("s3rl_torchrl", "bullet_safety_gym")]:
