@@ -253,8 +253,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         # Whether the evaluations over the limit come where the multiplier has let go (a cycle
         # that takes lambda back to about 0), and what they earn beside those within it.
         "lambda_min": min(known, default=math.nan),
-        "lambda_near_zero": (sum(lam < LAMBDA_NEAR_ZERO for lam in known) / len(known)
-                             if known else math.nan),
+        "lambda_near_zero": _mean([float(lam < LAMBDA_NEAR_ZERO) for lam in known]),
         "eval_cost_over_limit_near_zero": over(
             [c for lam, _, c in evals if lam < LAMBDA_NEAR_ZERO]
         ),

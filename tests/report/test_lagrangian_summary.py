@@ -230,7 +230,6 @@ def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
     assert "critic(read=mean)" in ld.setting_name(config)
 
 
-
 def test_where_the_multiplier_lets_go_by_hand(tmp_path):
     # frames, epoch, train reward, train cost, lambda, eval reward, eval cost; limit 10.
     rows = [
