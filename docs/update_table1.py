@@ -6,9 +6,10 @@ The section's status line (how many tasks are complete, how many of `sweep=table
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
 best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
 complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
-the complete tasks and the counts of its cost profiles are recomputed from the runs exported to
-results/safe_sound and results/table1 and from the paper's file; the prose around them is left
-as written (it says what the numbers mean, so reread it after a change).
+the complete tasks, its probabilities of improvement task by task and the counts of its cost
+profiles are recomputed from the runs exported to results/safe_sound and results/table1 and
+from the paper's file; the prose around them is left as written (it says what the numbers mean,
+so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """
 
@@ -33,6 +34,7 @@ TABLE_HEADER = "| task | algo | seeds | paper: reward / cost |"
 PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+PER_TASK_HEADER = "| task | last: P(cost lower) |"
 PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
 # The cost / limit thresholds the profile counts are read at: zero cost, a fifth and half of the
 # limit, the limit (the share within it), twice the limit.
@@ -112,6 +114,23 @@ def answer(result: Aggregate) -> list[str]:
             f"| {read.protocol.replace('_', '-')} | {pair.cost.cell()} | {pair.reward.cell()} "
             f"| {within} | {s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()} |"
         )
+    return rows
+
+
+def per_task(result: Aggregate) -> list[str]:
+    """Where the answer's probabilities come from: per complete task and protocol, the share of
+    the 9 pairs of runs (S3RL seed, SAC-Lag seed) in which S3RL's costs less and earns more
+    (ties one half); the last row is their mean over the tasks, the answer's point estimate."""
+    pairs = {read.protocol: read.pairs[0] for read in result.protocols}
+    columns = [(pair.cost_by_task, pair.reward_by_task) for pair in pairs.values()]
+    rows = [
+        f"| {task} | "
+        + " | ".join(f"{by_task[task]:.2f}" for both in columns for by_task in both)
+        + " |"
+        for task in next(iter(pairs.values())).tasks
+    ]
+    means = [estimate.point for pair in pairs.values() for estimate in (pair.cost, pair.reward)]
+    rows.append("| mean over the tasks | " + " | ".join(f"{m:.2f}" for m in means) + " |")
     return rows
 
 
@@ -195,6 +214,7 @@ def main() -> None:
     section = replace_table(section, PER_SEED_HEADER, seed_rows)
     result = aggregate([g for g in groups if g.task in set(complete)], "s3rl")
     section = replace_table(section, ANSWER_HEADER, answer(result))
+    section = replace_table(section, PER_TASK_HEADER, per_task(result))
     section = replace_table(section, PROFILE_HEADER, profile_counts(result))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")

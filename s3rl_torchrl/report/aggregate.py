@@ -13,7 +13,8 @@ ran and their seeds:
   ``metrics.probability_of_improvement``; its resamples with the same statistic in numpy): for
   each task both ran, the probability that a run of the first beats a run of the second (the
   Mann-Whitney U statistic over all pairs of runs; ties count one half), averaged over those
-  tasks; for the cost, beating is a *lower* cost;
+  tasks; for the cost, beating is a *lower* cost; the report also lists each task's term of
+  that average (which tasks the answer comes from);
 * **performance profiles**: the fraction of runs whose normalised reward is above each
   threshold, and the fraction whose ``cost / limit`` is at or below each threshold (at 1: the
   share within the limit).
@@ -70,6 +71,7 @@ __all__ = [
     "performance_profile",
     "performance_profiles_figure",
     "probability_of_improvement",
+    "probability_of_improvement_by_task",
     "reward_anchors",
     "rliable_problem",
     "run_scores",
@@ -188,6 +190,23 @@ def _improvement(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean(d > 0) + 0.5 * np.mean(d == 0))
 
 
+def probability_of_improvement_by_task(
+    x: Mapping[str, np.ndarray], y: Mapping[str, np.ndarray], lower_is_better: bool = False
+) -> dict[str, float]:
+    """Per task both ran, in task order: P(a run of X beats a run of Y), rliable's
+    ``probability_of_improvement`` (Mann-Whitney U / (runs of X x runs of Y), ties one half).
+    Their mean is the aggregate's point estimate; the table of them says which tasks it comes
+    from."""
+    from rliable import metrics
+
+    sign = -1.0 if lower_is_better else 1.0
+    tasks = sorted(set(x) & set(y))
+    # rliable takes (runs x tasks) matrices: one column, one task.
+    return {t: float(metrics.probability_of_improvement(sign * xs, sign * ys))
+            for t, xs, ys in zip(tasks, _columns({t: x[t] for t in tasks}),
+                                 _columns({t: y[t] for t in tasks}))}
+
+
 def probability_of_improvement(
     x: Mapping[str, np.ndarray],
     y: Mapping[str, np.ndarray],
@@ -199,8 +218,6 @@ def probability_of_improvement(
     Mann-Whitney U / (runs of X x runs of Y), ties one half), averaged over the tasks both ran;
     X's and Y's runs resampled independently within each task. Returns the estimate and those
     tasks."""
-    from rliable import metrics
-
     tasks = sorted(set(x) & set(y))
     if not tasks:
         return Estimate(math.nan, math.nan, math.nan), []
@@ -213,9 +230,8 @@ def probability_of_improvement(
         return np.array([np.mean([_improvement(cols[i], cols[k + i]) for i in range(k)])])
 
     _, low, high = bootstrap(func, strata, reps, seed)
-    # The point estimate from rliable itself (one matrix column per task).
-    point = np.mean([metrics.probability_of_improvement(strata[i], strata[k + i])
-                     for i in range(k)])
+    # The point estimate from rliable itself.
+    point = np.mean(list(probability_of_improvement_by_task(x, y, lower_is_better).values()))
     return Estimate(float(point), float(low[0]), float(high[0])), tasks
 
 
@@ -356,6 +372,9 @@ class PairRow:
     runs: tuple[int, int]
     cost: Estimate  # P(first's cost < second's)
     reward: Estimate  # P(first's reward > second's)
+    # The same per task (their means are the point estimates above).
+    cost_by_task: dict[str, float] = field(default_factory=dict)
+    reward_by_task: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -425,16 +444,18 @@ def _protocol_aggregate(
         if first not in scores or second not in scores:
             continue
         x, y = scores[first], scores[second]
-        cost, tasks = probability_of_improvement(
-            {t: s.cost for t, s in x.items()}, {t: s.cost for t, s in y.items()},
-            lower_is_better=True, reps=reps, seed=seed)
+        x_cost, y_cost = ({t: s.cost for t, s in z.items()} for z in (x, y))
+        x_reward, y_reward = ({t: s.reward for t, s in z.items()} for z in (x, y))
+        cost, tasks = probability_of_improvement(x_cost, y_cost, lower_is_better=True,
+                                                 reps=reps, seed=seed)
         if not tasks:
             continue
-        reward, _ = probability_of_improvement(
-            {t: s.reward for t, s in x.items()}, {t: s.reward for t, s in y.items()},
-            reps=reps, seed=seed)
+        reward, _ = probability_of_improvement(x_reward, y_reward, reps=reps, seed=seed)
         runs = (sum(len(x[t].seeds) for t in tasks), sum(len(y[t].seeds) for t in tasks))
-        rows.append(PairRow(first, second, tasks, runs, cost, reward))
+        rows.append(PairRow(
+            first, second, tasks, runs, cost, reward,
+            probability_of_improvement_by_task(x_cost, y_cost, lower_is_better=True),
+            probability_of_improvement_by_task(x_reward, y_reward)))
     return ProtocolAggregate(protocol, algos, rows, profile_data)
 
 
@@ -523,6 +544,12 @@ def _protocol_lines(read: ProtocolAggregate) -> list[str]:
                  p.cost.cell(), p.reward.cell()] for p in read.pairs]
         lines += _table(["probability of improvement", "tasks", "runs", "P(lower cost)",
                          "P(higher reward)"], rows, "llrrr")
+        lines += ["", "Per task (all pairs of the two algos' runs; their mean over the tasks is the "
+                  "estimate above):", ""]
+        rows = [[f"{p.first} over {p.second}", task, f"{p.cost_by_task[task]:.2f}",
+                 f"{p.reward_by_task[task]:.2f}"] for p in read.pairs for task in p.tasks]
+        lines += _table(["probability of improvement", "task", "P(lower cost)",
+                         "P(higher reward)"], rows, "llrr")
     else:
         lines.append("No two compared algos ran a common task: no probability of improvement.")
     lines.append("")

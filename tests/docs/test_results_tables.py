@@ -337,6 +337,38 @@ def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
         assert iqm == f"{s3rl.cost_ratio.cell()} / {sac_lag.cost_ratio.cell()}"
 
 
+PER_TASK_HEADER = "| task | last: P(cost lower) |"
+
+
+def test_table1_per_task_probabilities_count_the_pairs_of_runs():
+    # Counted here over the 9 pairs (S3RL seed, SAC-Lag seed) of each complete task: S3RL's
+    # run costs less, earns more, a tie one half. The last row is their mean over the tasks,
+    # which is the answer table's point estimate.
+    complete = complete_tasks()
+    rows = section_table(TABLE1_SECTION, PER_TASK_HEADER)
+    assert sorted(row[0] for row in rows[:-1]) == sorted(complete)
+    assert rows[-1][0] == "mean over the tasks"
+    policies = (("last", lambda r: r), ("best-feasible", lambda r: r["best_feasible"]))
+
+    def wins(task: str, policy, key: str, sign: float) -> float:
+        ours = [sign * policy(r)[key] for r in table1_runs(task, "s3rl").values()]
+        theirs = [sign * policy(r)[key] for r in table1_runs(task, "sac_lag").values()]
+        pairs = [(a > b) + 0.5 * (a == b) for a in ours for b in theirs]
+        return sum(pairs) / len(pairs)
+
+    expected = {
+        task: [wins(task, policy, key, sign) for _, policy in policies
+               for key, sign in (("cost_mean", -1.0), ("reward_mean", 1.0))]
+        for task in complete
+    }
+    for task, *cells in rows[:-1]:
+        assert all(close(c, v) for c, v in zip(cells, expected[task], strict=True)), task
+    means = [statistics.mean(column) for column in zip(*expected.values())]
+    assert all(close(c, v) for c, v in zip(rows[-1][1:], means, strict=True))
+    answer = {row[0]: row[1:3] for row in section_table(TABLE1_SECTION, ANSWER_HEADER)}
+    assert [numbers(cell)[0] for name, _ in policies for cell in answer[name]] == rows[-1][1:]
+
+
 PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
 PROFILE = section_table(TABLE1_SECTION, PROFILE_HEADER)
 

@@ -84,6 +84,9 @@ def test_hand_computed_case(tmp_path, make_run):
     assert (pair.first, pair.second, pair.tasks) == ("s3rl", "sac_lag", [TASK_A, TASK_B])
     assert pair.reward.point == pytest.approx(float(F(11, 18)))
     assert pair.cost.point == pytest.approx(float(F(23, 36)))
+    # The same per task, as the report's per-task table shows them.
+    assert pair.reward_by_task == pytest.approx({TASK_A: 5 / 9, TASK_B: 6 / 9})
+    assert pair.cost_by_task == pytest.approx({TASK_A: 8 / 9, TASK_B: 3.5 / 9})
 
     # Every interval holds its point estimate and stays within what the runs allow.
     for estimate in (*(getattr(r, k) for r in rows.values()
@@ -175,6 +178,9 @@ def test_s3rl_report_writes_the_aggregate_section(tmp_path, make_run, capsys):
     assert "| 0.80 [" in s3rl and "| 0.93 [" in s3rl and "(4 of 6) |" in s3rl
     pair = next(line for line in section.splitlines() if line.startswith("| s3rl over sac_lag"))
     assert f"| {TASK_A}, {TASK_B} | 6 vs 6 | 0.64 [" in pair and "| 0.61 [" in pair
+    # Per task: cost 8/9 and 3.5/9, reward 5/9 and 6/9 (the hand-computed case above).
+    assert f"| s3rl over sac_lag | {TASK_A} | 0.89 | 0.56 |" in section
+    assert f"| s3rl over sac_lag | {TASK_B} | 0.39 | 0.67 |" in section
     assert f"{REPS} resamples, NumPy seed 0" in section
     for ext in ("png", "svg"):
         assert (tmp_path / "r1" / f"{agg.AGGREGATE_FIGURE}.{ext}").stat().st_size > 0
