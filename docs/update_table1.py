@@ -6,8 +6,8 @@ The section's status line (how many tasks are complete, how many of `sweep=table
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
 best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
 complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
-the complete tasks, its probabilities of improvement task by task and the counts of its cost
-profiles are recomputed from the runs exported to results/safe_sound and results/table1 and
+the complete tasks, its probabilities of improvement task by task, the same without the one task
+that moves each most and the counts of its cost profiles are recomputed from the runs exported to results/safe_sound and results/table1 and
 from the paper's file; the prose around them is left as written (it says what the numbers mean,
 so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
@@ -21,9 +21,14 @@ from pathlib import Path
 
 from scipy.stats import ttest_rel
 
-from s3rl_torchrl.report.aggregate import Aggregate, aggregate
+from s3rl_torchrl.report.aggregate import (
+    Aggregate,
+    aggregate,
+    probability_of_improvement,
+    run_scores,
+)
 from s3rl_torchrl.report.paper import paper_results_for
-from s3rl_torchrl.report.runs import Run, find_runs, group_runs
+from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
@@ -35,6 +40,7 @@ PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
 ANSWER_HEADER = "| policy | P(S3RL's cost lower) | P(S3RL's reward higher) |"
 PER_TASK_HEADER = "| task | last: P(cost lower) |"
+WITHOUT_ONE_TASK_HEADER = "| reading | every complete task |"
 PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
 # The cost / limit thresholds the profile counts are read at: zero cost, a fifth and half of the
 # limit, the limit (the share within it), twice the limit.
@@ -134,6 +140,39 @@ def per_task(result: Aggregate) -> list[str]:
     return rows
 
 
+def without_one_task(result: Aggregate, groups: list[RunGroup]) -> list[str]:
+    """How far a single task moves the answer: each probability of improvement over every
+    complete task, then without the task whose removal lowers it most and without the one whose
+    removal raises it most (the mean of the other tasks' per-task values decides; the first in
+    task order on a tie), each with the interval of rliable's bootstrap over the tasks left."""
+    rows = []
+    for read in result.protocols:
+        (pair,) = read.pairs
+        scores = run_scores(groups, read.protocol)
+        first, second = scores[pair.first], scores[pair.second]
+        readings = (
+            ("cost lower", "cost", pair.cost, pair.cost_by_task, True),
+            ("reward higher", "reward", pair.reward, pair.reward_by_task, False),
+        )
+        for name, key, estimate, by_task, lower_is_better in readings:
+            without = {
+                task: statistics.mean(p for other, p in by_task.items() if other != task)
+                for task in by_task
+            }
+            cells = [estimate.cell()]
+            for pick in (min, max):
+                left_out = pick(without, key=without.get)
+                left, _ = probability_of_improvement(
+                    *({t: getattr(s, key) for t, s in run.items() if t != left_out}
+                      for run in (first, second)),
+                    lower_is_better=lower_is_better, reps=result.reps, seed=result.seed,
+                )
+                cells.append(f"{left.cell()} without {left_out}")
+            protocol = read.protocol.replace("_", "-")
+            rows.append(f"| {protocol}: P(S3RL's {name}) | " + " | ".join(cells) + " |")
+    return rows
+
+
 def profile_counts(result: Aggregate) -> list[str]:
     """The cost profiles of the same runs as counts: per protocol and algo, how many runs have
     cost / limit at or below each threshold (the figure's right column, read at a few points)."""
@@ -212,9 +251,12 @@ def main() -> None:
         if any(finals[task, a] for a in ALGOS.values())
     ]
     section = replace_table(section, PER_SEED_HEADER, seed_rows)
-    result = aggregate([g for g in groups if g.task in set(complete)], "s3rl")
+    complete_groups = [g for g in groups if g.task in set(complete)]
+    result = aggregate(complete_groups, "s3rl")
     section = replace_table(section, ANSWER_HEADER, answer(result))
     section = replace_table(section, PER_TASK_HEADER, per_task(result))
+    section = replace_table(section, WITHOUT_ONE_TASK_HEADER,
+                            without_one_task(result, complete_groups))
     section = replace_table(section, PROFILE_HEADER, profile_counts(result))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")

@@ -338,6 +338,18 @@ def test_table1_answer_across_tasks_is_the_aggregate_of_the_complete_tasks():
 
 
 PER_TASK_HEADER = "| task | last: P(cost lower) |"
+POLICIES = (("last", lambda r: r), ("best-feasible", lambda r: r["best_feasible"]))
+# (reading, final_eval.json key, sign that makes higher better)
+READINGS = (("cost lower", "cost_mean", -1.0), ("reward higher", "reward_mean", 1.0))
+
+
+def pair_wins(task: str, policy, key: str, sign: float) -> float:
+    """The share of a task's 9 pairs of runs (S3RL seed, SAC-Lag seed) in which S3RL's is
+    better, a tie one half, counted from the runs' final_eval.json."""
+    ours = [sign * policy(r)[key] for r in table1_runs(task, "s3rl").values()]
+    theirs = [sign * policy(r)[key] for r in table1_runs(task, "sac_lag").values()]
+    pairs = [(a > b) + 0.5 * (a == b) for a in ours for b in theirs]
+    return sum(pairs) / len(pairs)
 
 
 def test_table1_per_task_probabilities_count_the_pairs_of_runs():
@@ -348,17 +360,10 @@ def test_table1_per_task_probabilities_count_the_pairs_of_runs():
     rows = section_table(TABLE1_SECTION, PER_TASK_HEADER)
     assert sorted(row[0] for row in rows[:-1]) == sorted(complete)
     assert rows[-1][0] == "mean over the tasks"
-    policies = (("last", lambda r: r), ("best-feasible", lambda r: r["best_feasible"]))
-
-    def wins(task: str, policy, key: str, sign: float) -> float:
-        ours = [sign * policy(r)[key] for r in table1_runs(task, "s3rl").values()]
-        theirs = [sign * policy(r)[key] for r in table1_runs(task, "sac_lag").values()]
-        pairs = [(a > b) + 0.5 * (a == b) for a in ours for b in theirs]
-        return sum(pairs) / len(pairs)
-
+    policies = POLICIES
     expected = {
-        task: [wins(task, policy, key, sign) for _, policy in policies
-               for key, sign in (("cost_mean", -1.0), ("reward_mean", 1.0))]
+        task: [pair_wins(task, policy, key, sign) for _, policy in policies
+               for _, key, sign in READINGS]
         for task in complete
     }
     for task, *cells in rows[:-1]:
@@ -367,6 +372,41 @@ def test_table1_per_task_probabilities_count_the_pairs_of_runs():
     assert all(close(c, v) for c, v in zip(rows[-1][1:], means, strict=True))
     answer = {row[0]: row[1:3] for row in section_table(TABLE1_SECTION, ANSWER_HEADER)}
     assert [numbers(cell)[0] for name, _ in policies for cell in answer[name]] == rows[-1][1:]
+
+
+WITHOUT_ONE_TASK_HEADER = "| reading | every complete task |"
+
+
+def test_table1_without_one_task_leaves_out_the_tasks_that_move_it_most():
+    # Each reading without one complete task is the mean of the other tasks' pair counts; the
+    # rows name the task whose removal lowers it most and the one whose removal raises it most
+    # (the first in task order on a tie), and quote the aggregate's bootstrap over the rest.
+    import numpy as np
+
+    from s3rl_torchrl.report.aggregate import probability_of_improvement
+
+    complete = sorted(complete_tasks())
+    written = {row[0]: row[1:] for row in section_table(TABLE1_SECTION, WITHOUT_ONE_TASK_HEADER)}
+    answer = {row[0]: row[1:3] for row in section_table(TABLE1_SECTION, ANSWER_HEADER)}
+    assert len(written) == len(POLICIES) * len(READINGS)
+    for (policy_name, policy), (j, (name, key, sign)) in (
+        (policy, reading) for policy in POLICIES for reading in enumerate(READINGS)
+    ):
+        every, lowest, highest = written[f"{policy_name}: P(S3RL's {name})"]
+        assert every == answer[policy_name][j]
+        wins = {task: pair_wins(task, policy, key, sign) for task in complete}
+        without = {t: statistics.mean(w for u, w in wins.items() if u != t) for t in complete}
+        for cell, target in ((lowest, min(without.values())), (highest, max(without.values()))):
+            estimate, left_out = cell.split(" without ")
+            assert left_out == next(t for t in complete if without[t] == target)
+            runs = [
+                {t: np.array([policy(r)[key] for r in table1_runs(t, algo).values()])
+                 for t in complete if t != left_out}
+                for algo in ("s3rl", "sac_lag")
+            ]
+            bootstrapped, _ = probability_of_improvement(*runs, lower_is_better=sign < 0)
+            assert close(numbers(estimate)[0], target)
+            assert estimate == bootstrapped.cell(), (policy_name, name, left_out)
 
 
 PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
