@@ -22,6 +22,8 @@ LAGRANGIAN_CHOICES = ("pid", "learned", "none")
 # The contrastive phase's safety label (docs/representation.md): the paper's binary safe/unsafe
 # label, the discounted cost-to-go (transforms.CostToGo) or the task's margin (TaskSpec).
 CONTRASTIVE_LABELS = ("binary", "cost_to_go", "margin")
+# Where in each interval of T gradient steps the contrastive phase runs (ContrastiveConfig.phase_at).
+PHASE_POSITIONS = ("start", "end")
 
 
 class ConfigError(ValueError):
@@ -102,6 +104,13 @@ class ContrastiveConfig:
     batch_size: int = 64  # B: B anchors, B positives, B negatives per InfoNCE step
     update_interval: int = 1000  # T: gradient steps between phases (enc_update_steps)
     steps: int = 50  # E: InfoNCE steps per phase (enc_training_epoch)
+    # Where in each interval the phase runs. "start": after the interval's first gradient step,
+    # so the actor head (frozen during the phase) takes T - 1 steps on the moved encoder before
+    # the interval ends. "end": after its last step, the runs before 2026-11-28: when T divides
+    # an epoch's gradient steps (the paper's 1000 of 2000), every evaluation, checkpoint and the
+    # final policy then came right after a phase (docs/representation.md, "When the contrastive
+    # phase runs"). Either way one phase per T steps.
+    phase_at: str = "start"
     lr: float = 5e-4
     momentum_tau: float | None = None  # MoCo-style target encoder when set
     # The safety label the phase contrasts: "binary" (the paper's, SafetyInfoNCELoss),
@@ -117,6 +126,14 @@ class ContrastiveConfig:
     def graded(self) -> bool:
         return self.label != "binary"
 
+    def phase_due(self, grad_steps: int) -> bool:
+        """Whether a phase runs after gradient step ``grad_steps`` (counted from 1): one per T
+        steps from the first full interval on, after step T + 1, 2T + 1, ... (``start``) or
+        after step T, 2T, ... (``end``)."""
+        T = self.update_interval
+        offset = 1 if self.phase_at == "start" else 0
+        return grad_steps >= T and (grad_steps - offset) % T == 0
+
     def check(self, path: str) -> None:
         check_positive(f"{path}.temperature", self.temperature)
         check_range(f"{path}.batch_size", self.batch_size, 1)
@@ -126,6 +143,7 @@ class ContrastiveConfig:
         if self.momentum_tau is not None:
             check_range(f"{path}.momentum_tau", self.momentum_tau, 0.0, 1.0, low_inclusive=False)
         check_choice(f"{path}.label", self.label, CONTRASTIVE_LABELS)
+        check_choice(f"{path}.phase_at", self.phase_at, PHASE_POSITIONS)
         check_choice(f"{path}.positives", self.positives, GRADED_POSITIVES)
         if not 0.0 <= self.label_gamma < 1.0:
             fail(f"{path}.label_gamma", self.label_gamma, "must be in [0.0, 1.0)")

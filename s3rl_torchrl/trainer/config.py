@@ -448,7 +448,9 @@ def saved_config_node(saved: dict) -> DictConfig:
       a DDPG run ``update_order`` (always ``fsrl``) and the SAC critics' switches, none of
       which its family read;
     - a config without ``diagnostics`` (before the trainer hooks) ran the linear probes at
-      every epoch, so they stay on: the resumed run logs the columns it logged.
+      every epoch, so they stay on: the resumed run logs the columns it logged;
+    - a ``contrastive_cfg`` without ``phase_at`` (before 2026-11-28) ran each contrastive phase
+      at the end of its interval, so it keeps ``end``: a resume keeps the run's schedule.
     """
     saved = dict(saved)
     algo = dict(saved.get("algo") or {})
@@ -456,6 +458,8 @@ def saved_config_node(saved: dict) -> DictConfig:
     kept = {f.name for f in fields(family.config)}
     saved["algo"] = {key: value for key, value in algo.items() if key in kept}
     saved.setdefault("diagnostics", {"probes": True})
+    if isinstance(saved["algo"].get("contrastive_cfg"), dict):
+        saved["algo"]["contrastive_cfg"] = {"phase_at": "end", **saved["algo"]["contrastive_cfg"]}
     return OmegaConf.merge(_train_schema(saved["algo"]), saved)
 
 

@@ -441,7 +441,8 @@ class Trainer:
 
     def _after_gradient_step(self, losses: TensorDictBase) -> None:
         """Counters, last losses, lambda under cadence step, every ``T`` steps the contrastive
-        phase, then the hooks (shared with the multi-seed trainer, whose gradient steps are
+        phase (at the start or the end of each interval: ``contrastive_cfg.phase_at``), then the
+        hooks (shared with the multi-seed trainer, whose gradient steps are
         batched over seeds)."""
         agent = self.agent
         self.counters.grad_steps += 1
@@ -451,8 +452,7 @@ class Trainer:
             self.counters.lagrangian_updates = agent.lagrangian.controller.num_updates
 
         phase = agent.contrastive
-        interval = self.cfg.algo.contrastive_cfg.update_interval
-        if phase is not None and self.counters.grad_steps % interval == 0:
+        if phase is not None and self.cfg.algo.contrastive_cfg.phase_due(self.counters.grad_steps):
             stats = phase.run()
             if stats is None:
                 self.counters.contrastive_skipped += 1

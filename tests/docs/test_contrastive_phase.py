@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from hydra import compose, initialize_config_dir
 
 from s3rl_torchrl.recipes import config_dir
@@ -29,9 +30,10 @@ def test_halfcheetah_tiny_run_skips_every_phase(tmp_path):
     cfg = tiny("SafetyHalfCheetahVelocity-v1")
     result = train(cfg, tmp_path)
     c = result.counters
-    # 125 gradient steps, a phase every update_interval = 10: 12 phases, none with data.
-    expected_phases = c.grad_steps // cfg.algo.contrastive_cfg.update_interval
-    assert (c.contrastive_phases, c.contrastive_skipped) == (0, expected_phases) == (0, 12)
+    # 125 gradient steps, a phase every update_interval = 10 at the start of each interval
+    # (after steps 11, 21, ..., 121): 12 phases, none with data.
+    assert c.grad_steps == 125 and cfg.algo.contrastive_cfg.update_interval == 10
+    assert (c.contrastive_phases, c.contrastive_skipped) == (0, 12)
     assert all(math.isnan(v) for row in result.history for v in contrastive_columns(row))
     assert contrastive_columns(result.history[0])  # the columns exist (NaN), as documented
     line = contrastive_summary(cfg, result)
@@ -46,3 +48,31 @@ def test_hopper_tiny_run_runs_every_phase(tmp_path):
     assert (c.contrastive_phases, c.contrastive_skipped) == (12, 0)
     assert all(math.isfinite(v) for v in contrastive_columns(result.history[-1]))
     assert contrastive_summary(cfg, result) == "Contrastive phases: 12 ran, 0 skipped."
+
+
+@pytest.mark.parametrize("phase_at, steps", [("start", 11), ("end", 10)])
+def test_a_phase_runs_after_the_step_phase_at_names(phase_at, steps, tmp_path, monkeypatch):
+    # Which gradient step each phase of a tiny Hopper run follows, counted from the
+    # algorithm's own update calls: 11, 21, ... (start) or 10, 20, ... (end), T = 10.
+    from s3rl_torchrl.algorithms.contrastive import ContrastivePhase
+    from s3rl_torchrl.trainer.loop import Trainer
+
+    updates, after = [], []
+    update, run = Trainer._update, ContrastivePhase.run
+
+    def counted_update(self, batch):
+        updates.append(None)
+        return update(self, batch)
+
+    def recorded_run(self):
+        after.append(len(updates))
+        return run(self)
+
+    monkeypatch.setattr(Trainer, "_update", counted_update)
+    monkeypatch.setattr(ContrastivePhase, "run", recorded_run)
+    cfg = tiny("SafetyHopperVelocity-v1")
+    cfg.algo.contrastive_cfg.phase_at = phase_at
+    result = train(cfg, tmp_path)
+    assert result.counters.grad_steps == len(updates) == 125
+    assert after == list(range(steps, 125, 10))
+    assert result.counters.contrastive_phases == 12

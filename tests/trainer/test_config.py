@@ -237,6 +237,8 @@ def test_pid_omnisafe_is_sacpid_per_gradient_step(compose):
         ("algo.contrastive_cfg.lr=nan", "'algo.contrastive_cfg.lr': must be a finite number"),
         ("algo.lagrangian_cadence=epoch", "'algo.lagrangian_cadence': allowed values are collect"),
         ("algo.lagrangian_window=0", "'algo.lagrangian_window': must be in [1"),
+        ("algo.contrastive_cfg.phase_at=middle",
+         "'algo.contrastive_cfg.phase_at': allowed values are start, end"),
     ],
 )
 def test_bad_values_name_the_field_and_the_valid_choices(override, message, compose):
@@ -434,3 +436,23 @@ def test_safe_preset_has_the_sound_critics_and_paper_fsrls(compose):
     assert fsrl.algo.lagrangian_cadence == safe.algo.lagrangian_cadence == "step"
     paper = validate(compose("experiment=paper", "algo=sac_lag"))
     assert (paper.algo.cost_critic_read, paper.algo.cost_nonnegative) == ("min", False)
+
+
+@pytest.mark.parametrize(
+    "phase_at, interval, expected",
+    [
+        # One phase per T = 10 gradient steps of the first 45, from the first full interval on.
+        ("start", 10, [11, 21, 31, 41]),
+        ("end", 10, [10, 20, 30, 40]),
+        # T = 1: after every step either way.
+        ("start", 1, list(range(1, 46))),
+        ("end", 1, list(range(1, 46))),
+    ],
+)
+def test_contrastive_phase_runs_at_the_start_or_the_end_of_each_interval(
+    phase_at, interval, expected
+):
+    from s3rl_torchrl.algorithms.config import ContrastiveConfig
+
+    cfg = ContrastiveConfig(update_interval=interval, phase_at=phase_at)
+    assert [step for step in range(1, 46) if cfg.phase_due(step)] == expected

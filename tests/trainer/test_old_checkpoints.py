@@ -87,6 +87,10 @@ def test_an_old_config_loads_with_its_familys_fields(case):
     for name in kept:  # what the family has keeps its saved value
         value = getattr(cfg.algo, name)
         value = vars(value) if hasattr(value, "__dict__") else value
+        if name == "contrastive_cfg":
+            # Before phase_at, each contrastive phase ran at the end of its interval.
+            assert value == {**saved["algo"][name], "phase_at": "end"}
+            continue
         assert value == saved["algo"][name], name
     dropped = set(saved["algo"]) - kept
     assert dropped == {
@@ -112,6 +116,12 @@ def test_a_config_of_this_version_loads_unchanged(tiny_config):
         assert saved_train_config(to_container(cfg)) == cfg
     node = saved_config_node({**to_container(tiny_config("algo=ppo")), "diagnostics": {}})
     assert node.diagnostics.probes is False  # a config that says so keeps them off
+    # A saved phase_at is kept; only a config from before it gets "end" (module docstring).
+    saved = to_container(tiny_config("algo=s3rl"))
+    assert saved["algo"]["contrastive_cfg"]["phase_at"] == "start"
+    assert saved_train_config(saved).algo.contrastive_cfg.phase_at == "start"
+    del saved["algo"]["contrastive_cfg"]["phase_at"]
+    assert saved_train_config(saved).algo.contrastive_cfg.phase_at == "end"
 
 
 def test_s3rl_eval_loads_an_old_checkpoint(tmp_path):
