@@ -508,3 +508,45 @@ def test_update_table1_paired_cell_by_hand(update_table1):
     s3rl = {10: final(11.0), 20: final(22.0), 30: final(33.0)}
     sac_lag = {10: final(10.0), 20: final(20.0), 30: final(30.0)}
     assert update_table1.paired(s3rl, sac_lag, "last") == "+2.00 (p = 0.07) | +0.00 (p undefined)"
+
+
+PHASE_SECTION = "### When S3RL is evaluated right after a contrastive phase"
+PROBE = RESULTS / "phase_probe"
+
+
+def test_phase_offset_table_is_the_continued_runs_metrics():
+    # CarCircle-v0 S3RL seed 10 continued past 1M with T = 1500 (phases after gradient steps
+    # that are multiples of 1500): each epoch's row, with the steps since the last phase.
+    run = PROBE / "interval1500" / "s3rl_SafetyCarCircle-v0" / "seed10"
+    config = json.loads((run / "config.json").read_text())
+    assert config["algo"]["contrastive_cfg"]["update_interval"] == 1500
+    with (run / "metrics.csv").open() as f:
+        rows = [r for r in csv.DictReader(f) if int(r["frames"]) > 1_000_000]
+    written = section_table(PHASE_SECTION, "| frames | gradient steps since the last phase |")
+    assert len(written) == len(rows) == 9
+    for cells, row in zip(written, rows, strict=True):
+        assert cells[:2] == [row["frames"], str(int(row["grad_steps"]) % 1500)]
+        for cell, (reward, cost) in zip(
+            cells[2:], (("eval/reward", "eval/cost"), ("train/reward", "train/cost")), strict=True
+        ):
+            r, c = numbers(cell)
+            assert close(r, float(row[reward])) and close(c, float(row[cost]))
+
+
+def test_phase_probe_table_is_the_runs_at_1m_and_1000_steps_later():
+    written = section_table(PHASE_SECTION, "| task | algo | seed | at 1M: reward / cost |")
+    probed = sorted(PROBE.glob("after1000/*/seed*/final_eval.json"))
+    assert len(written) == len(probed) == 30
+    for task, name, seed, at_1m, later in written:
+        group = f"{ALGOS[name]}_{task}/seed{seed}"
+        config = json.loads((PROBE / "after1000" / group / "config.json").read_text())
+        # 5000 more frames (1000 gradient steps at 0.2 per frame) with no phase in them.
+        assert config["collector"]["total_frames"] == 1_005_000
+        assert config["algo"]["contrastive_cfg"]["update_interval"] > 1000
+        for cell, path in (
+            (at_1m, RESULTS / "table1" / group / "final_eval.json"),
+            (later, PROBE / "after1000" / group / "final_eval.json"),
+        ):
+            final = json.loads(path.read_text())
+            r, c = numbers(cell)
+            assert close(r, final["reward_mean"]) and close(c, final["cost_mean"]), (group, cell)
