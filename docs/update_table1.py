@@ -6,9 +6,10 @@ The section's status line (how many tasks are complete, how many of `sweep=table
 exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
 best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
 complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
-the complete tasks, its probabilities of improvement task by task, the same without the one task
-that moves each most and the counts of its cost profiles are recomputed from the runs exported to results/safe_sound and results/table1 and
-from the paper's file; the prose around them is left as written (it says what the numbers mean,
+the complete tasks, its probabilities of improvement task by task, each probability without the
+task that lowers it most and the one that raises it most, and the counts of its cost profiles
+are recomputed from the runs exported to results/safe_sound and results/table1 and from the
+paper's file; the prose around them is left as written (it says what the numbers mean,
 so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """

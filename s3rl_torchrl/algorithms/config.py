@@ -108,8 +108,8 @@ class ContrastiveConfig:
     # so the actor head (frozen during the phase) takes T - 1 steps on the moved encoder before
     # the interval ends. "end": after its last step, the runs before 2026-11-28: when T divides
     # an epoch's gradient steps (the paper's 1000 of 2000), every evaluation, checkpoint and the
-    # final policy then came right after a phase (docs/representation.md, "When the contrastive
-    # phase runs"). Either way one phase per T steps.
+    # final policy then came right after a phase (docs/representation.md, "Where in its interval
+    # a phase runs"). Either way one phase per T steps.
     phase_at: str = "start"
     lr: float = 5e-4
     momentum_tau: float | None = None  # MoCo-style target encoder when set
