@@ -106,10 +106,11 @@ class ContrastiveConfig:
     steps: int = 50  # E: InfoNCE steps per phase (enc_training_epoch)
     # Where in each interval the phase runs. "start": after the interval's first gradient step,
     # so the actor head (frozen during the phase) takes T - 1 steps on the moved encoder before
-    # the interval ends. "end": after its last step, the runs before 2026-11-28: when T divides
-    # an epoch's gradient steps (the paper's 1000 of 2000), every evaluation, checkpoint and the
-    # final policy then came right after a phase (docs/representation.md, "Where in its interval
-    # a phase runs"). Either way one phase per T steps.
+    # the interval ends. "end": after its last step, the runs before 2026-11-28: where an epoch
+    # ended on a multiple of T gradient steps (experiment=paper; SafetyCarCircle-v0 under
+    # experiment=safe), every evaluation, checkpoint and the final policy came right after a
+    # phase (docs/representation.md, "Where in its interval a phase runs"). One phase per T
+    # steps either way.
     phase_at: str = "start"
     lr: float = 5e-4
     momentum_tau: float | None = None  # MoCo-style target encoder when set
