@@ -9,13 +9,15 @@ complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's a
 the complete tasks, its probabilities of improvement task by task, each probability without the
 task that lowers it most and the one that raises it most, and the counts of its cost profiles
 are recomputed from the runs exported to results/safe_sound and results/table1 and from the
-paper's file; the prose around them is left as written (it says what the numbers mean,
-so reread it after a change).
+paper's file; the two tables of the contrastive-phase probe, from results/phase_probe. The prose
+around them is left as written (it says what the numbers mean, so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """
 
 from __future__ import annotations
 
+import csv
+import json
 import math
 import statistics
 from pathlib import Path
@@ -46,6 +48,11 @@ PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
 # The cost / limit thresholds the profile counts are read at: zero cost, a fifth and half of the
 # limit, the limit (the share within it), twice the limit.
 PROFILE_THRESHOLDS = (0.0, 0.2, 0.5, 1.0, 2.0)
+# The probe of where in its interval a contrastive phase falls (results/phase_probe): one run
+# continued past 1M with a longer interval, and finished runs continued 1000 gradient steps.
+PROBE = RESULTS / "phase_probe"
+PHASE_OFFSET_HEADER = "| frames | gradient steps since the last phase |"
+PHASE_PROBE_HEADER = "| task | algo | seed | at 1M: reward / cost |"
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
@@ -192,6 +199,42 @@ def profile_counts(result: Aggregate) -> list[str]:
     return rows
 
 
+def phase_offset_rows() -> list[str]:
+    """Each epoch past 1M of the run continued with a longer contrastive interval: how many
+    gradient steps it ended after the last phase, its evaluation and its training episodes."""
+    (run,) = (PROBE / "interval1500").glob("*/seed*")
+    interval = json.loads((run / "config.json").read_text())["algo"]["contrastive_cfg"][
+        "update_interval"
+    ]
+    with (run / "metrics.csv").open() as f:
+        rows = [row for row in csv.DictReader(f) if int(row["frames"]) > 1_000_000]
+    return [
+        f"| {row['frames']} | {int(row['grad_steps']) % interval} "
+        f"| {float(row['eval/reward']):.1f} / {float(row['eval/cost']):.1f} "
+        f"| {float(row['train/reward']):.1f} / {float(row['train/cost']):.1f} |"
+        for row in rows
+    ]
+
+
+def phase_probe_rows(tasks: list[str]) -> list[str]:
+    """Each probed run's last policy at 1M (its Table 1 export) beside the same run 1000
+    gradient steps later, in Table 1's task order, S3RL first, seeds ascending."""
+    rows = []
+    for task in tasks:
+        for name, algo in ALGOS.items():
+            for seed in SEEDS:
+                group = f"{algo}_{task}/seed{seed}"
+                later = PROBE / "after1000" / group / "final_eval.json"
+                if not later.exists():
+                    continue
+                cells = []
+                for path in (RESULTS / "table1" / group / "final_eval.json", later):
+                    final = json.loads(path.read_text())
+                    cells.append(f"{final['reward_mean']:.1f} / {final['cost_mean']:.1f}")
+                rows.append(f"| {task} | {name} | {seed} | " + " | ".join(cells) + " |")
+    return rows
+
+
 def table_body(lines: list[str], header: str) -> tuple[int, int]:
     """Where the rows of the table whose header starts with `header` begin and end."""
     start = next(i for i, line in enumerate(lines) if line.startswith(header)) + 2
@@ -259,6 +302,8 @@ def main() -> None:
     section = replace_table(section, WITHOUT_ONE_TASK_HEADER,
                             without_one_task(result, complete_groups))
     section = replace_table(section, PROFILE_HEADER, profile_counts(result))
+    section = replace_table(section, PHASE_OFFSET_HEADER, phase_offset_rows())
+    section = replace_table(section, PHASE_PROBE_HEADER, phase_probe_rows(tasks))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")
 

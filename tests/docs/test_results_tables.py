@@ -487,11 +487,17 @@ def test_update_table1_rewrites_the_committed_tables_unchanged(
         line for line in committed.splitlines() if line.startswith("| SafetyCarRun-v0 | S3RL")
     )
     status = next(line for line in committed.splitlines() if line.startswith("**Where it stands:"))
+    # The phase probe's tables too: an epoch row and a probed run's row.
+    epoch = next(line for line in committed.splitlines() if line.startswith("| 1010000 |"))
+    probed = next(
+        line for line in committed.splitlines() if line.startswith("| SafetyAntRun-v0 | S3RL | 10 |")
+    )
     stale = tmp_path / "results.md"
     stale.write_text(
-        committed.replace(row, row.replace("554.00", "1.00")).replace(
-            status, "**Where it stands: 0 of 16 tasks are complete.**"
-        )
+        committed.replace(row, row.replace("554.00", "1.00"))
+        .replace(status, "**Where it stands: 0 of 16 tasks are complete.**")
+        .replace(epoch, "| 1010000 | 7 | 1.0 / 1.0 | 1.0 / 1.0 |")
+        .replace(probed, "| SafetyAntRun-v0 | S3RL | 10 | 1.0 / 1.0 | 1.0 / 1.0 |")
     )
     monkeypatch.setattr(update_table1, "DOC", stale)
     update_table1.main()
