@@ -9,7 +9,7 @@ complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's a
 the complete tasks, its probabilities of improvement task by task, each probability without the
 task that lowers it most and the one that raises it most, and the counts of its cost profiles
 are recomputed from the runs exported to results/safe_sound and results/table1 and from the
-paper's file; the two tables of the contrastive-phase probe, from results/phase_probe. The prose
+paper's file, and the two tables of the contrastive-phase probe from results/phase_probe. The prose
 around them is left as written (it says what the numbers mean, so reread it after a change).
 tests/docs/test_results_tables.py checks the doc against the same files on its own.
 """
@@ -216,21 +216,21 @@ def phase_offset_rows() -> list[str]:
     ]
 
 
-def phase_probe_rows(tasks: list[str]) -> list[str]:
-    """Each probed run's last policy at 1M (its Table 1 export) beside the same run 1000
-    gradient steps later, in Table 1's task order, S3RL first, seeds ascending."""
+def phase_probe_rows(tasks: list[str], finals: dict[tuple[str, str], dict[int, dict]]) -> list[str]:
+    """Each probed run's last policy at 1M (`finals`, its Table 1 export as main reads it)
+    beside the same run 1000 gradient steps later, in Table 1's task order, S3RL first, seeds
+    ascending."""
     rows = []
     for task in tasks:
         for name, algo in ALGOS.items():
             for seed in SEEDS:
-                group = f"{algo}_{task}/seed{seed}"
-                later = PROBE / "after1000" / group / "final_eval.json"
+                later = PROBE / "after1000" / f"{algo}_{task}" / f"seed{seed}" / "final_eval.json"
                 if not later.exists():
                     continue
-                cells = []
-                for path in (RESULTS / "table1" / group / "final_eval.json", later):
-                    final = json.loads(path.read_text())
-                    cells.append(f"{final['reward_mean']:.1f} / {final['cost_mean']:.1f}")
+                cells = [
+                    f"{final['reward_mean']:.1f} / {final['cost_mean']:.1f}"
+                    for final in (finals[task, algo][seed], json.loads(later.read_text()))
+                ]
                 rows.append(f"| {task} | {name} | {seed} | " + " | ".join(cells) + " |")
     return rows
 
@@ -303,7 +303,7 @@ def main() -> None:
                             without_one_task(result, complete_groups))
     section = replace_table(section, PROFILE_HEADER, profile_counts(result))
     section = replace_table(section, PHASE_OFFSET_HEADER, phase_offset_rows())
-    section = replace_table(section, PHASE_PROBE_HEADER, phase_probe_rows(tasks))
+    section = replace_table(section, PHASE_PROBE_HEADER, phase_probe_rows(tasks, finals))
     DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
     print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")
 
