@@ -195,11 +195,13 @@ def build_agent(
     lagrangian = contrastive = None
     if algo.lagrangian != "none":
         lagrangian = LagrangianUpdater(
-            build_lagrangian(algo, cost_limit),
+            # The controller's d: the share of the task's limit it aims at (1.0: the limit).
+            build_lagrangian(algo, cost_limit * algo.lagrangian_target),
             agent.loss,
             cadence=algo.lagrangian_cadence,
             window=algo.lagrangian_window,
             warmup_frames=algo.lagrangian_warmup_frames,
+            eval_window=algo.lagrangian_eval_window,
         )
     if algo.contrastive:
         if labelled is None:

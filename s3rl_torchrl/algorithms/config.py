@@ -185,6 +185,12 @@ class AlgoConfig:
     # Upper bound of the learned multiplier (OmniSafe's lagrangian_upper_bound); None: none.
     # The PID controller has its own (pid.penalty_max).
     lagrangian_max: float | None = None
+    # What the controller aims at, for the policy a run delivers (docs/objectives.md, "Aiming at
+    # the delivered policy"): the fraction of task.cost_limit it holds J at (1.0: the limit)...
+    lagrangian_target: float = 1.0
+    # ...and J itself: 0 follows the training (stochastic) episodes alone; K > 0 follows, per
+    # cost, the larger of that and the mean cost of the last K deterministic evaluation episodes.
+    lagrangian_eval_window: int = 0
     rescaling: bool = True  # divide the actor loss by 1 + lambda (FSRL, paper)
     gamma: float = 0.99
     actor_lr: float = 5e-4
@@ -208,6 +214,8 @@ class AlgoConfig:
         check_choice(f"{path}.lagrangian_cadence", self.lagrangian_cadence, LAGRANGIAN_CADENCES)
         check_range(f"{path}.lagrangian_window", self.lagrangian_window, 1)
         check_range(f"{path}.lagrangian_warmup_frames", self.lagrangian_warmup_frames, 0)
+        check_range(f"{path}.lagrangian_target", self.lagrangian_target, 0.0, 1.0, low_inclusive=False)
+        check_range(f"{path}.lagrangian_eval_window", self.lagrangian_eval_window, 0)
         if self.lagrangian_max is not None:
             check_positive(f"{path}.lagrangian_max", self.lagrangian_max)
             if self.lagrangian != "learned":

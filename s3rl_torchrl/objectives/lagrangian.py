@@ -19,7 +19,11 @@ How often ``update`` runs and from which episodes is :class:`LagrangianUpdater`'
   ``window`` finished training episodes (:class:`EpisodeCostWindow`).
 
 Both cadences keep lambda at its initial value until more than ``warmup_frames`` frames have
-been collected. The controllers' state is a handful of Python floats (checkpointed as the
+been collected. With ``eval_window=K > 0`` the controller follows, per cost, the larger of that
+training mean and the mean cost of the last ``K`` deterministic evaluation episodes
+(:meth:`LagrangianUpdater.observe_evaluation`): the training episodes come from the stochastic,
+exploring policy, while a run delivers its deterministic policy, whose cost can sit on either
+side of the training cost (docs/objectives.md, "Aiming at the delivered policy"). The controllers' state is a handful of Python floats (checkpointed as the
 modules' extra state): a per-step update then costs microseconds, where the same arithmetic on
 one-element tensors cost 0.13 ms (PID) and 0.36 ms (Adam through ``torch.optim``) per call,
 1-4% of a gradient step (docs/benchmarks.md).
@@ -442,8 +446,11 @@ class LagrangianUpdater(nn.Module):
         window: episodes in the running window (``cadence="step"`` only).
         warmup_frames: lambda keeps its initial value until more than this many frames have
             been collected (OmniSafe's ``warmup_epochs`` x ``steps_per_epoch``).
+        eval_window: ``0`` (the training episodes alone) or the number of deterministic
+            evaluation episodes whose mean cost the controller also follows: ``J`` is then, per
+            cost, the larger of the training mean and that mean (once an evaluation has run).
 
-    ``state_dict`` holds the controller's state and the window.
+    ``state_dict`` holds the controller's state and the windows.
     """
 
     def __init__(
@@ -454,6 +461,7 @@ class LagrangianUpdater(nn.Module):
         cadence: Literal["collect", "step"] = "collect",
         window: int = 10,
         warmup_frames: int = 0,
+        eval_window: int = 0,
     ):
         super().__init__()
         if cadence not in LAGRANGIAN_CADENCES:
@@ -468,6 +476,11 @@ class LagrangianUpdater(nn.Module):
         self.cadence = cadence
         self.warmup_frames = warmup_frames
         self.window = EpisodeCostWindow(window, controller.num_costs) if cadence == "step" else None
+        if isinstance(eval_window, bool) or not isinstance(eval_window, int) or eval_window < 0:
+            raise ValueError(f"eval_window must be an integer >= 0, got {eval_window!r}.")
+        self.evaluation_window = (
+            EpisodeCostWindow(eval_window, controller.num_costs) if eval_window else None
+        )
         self._loss = [loss]  # a list: not a submodule (the loss is checkpointed on its own)
         self._frames = 0
 
@@ -489,18 +502,33 @@ class LagrangianUpdater(nn.Module):
         self._frames = frames
         if self.cadence == "step":
             self.window.extend(episode_costs)
-            return self.window.mean()
+            return self.signal(self.window.mean())
         if episode_costs.shape[0] == 0 or self.warming_up:
             return None
-        mean_cost = episode_costs.double().mean(0).tolist()
+        mean_cost = self.signal(episode_costs.double().mean(0).tolist())
         self._set(self.controller.update_floats(mean_cost))
         return mean_cost
+
+    def observe_evaluation(self, episode_costs: Tensor | Sequence) -> None:
+        """The costs of deterministic evaluation episodes (``[episodes, m]``, oldest first);
+        kept only with ``eval_window > 0``, where they join the controller's signal."""
+        if self.evaluation_window is not None:
+            self.evaluation_window.extend(episode_costs)
+
+    def signal(self, training_cost: list[float] | None) -> list[float] | None:
+        """The ``J`` the controller follows, given the training episodes' mean cost: that mean,
+        or with ``eval_window > 0`` per cost the larger of it and the evaluation window's mean
+        (the training mean alone until an evaluation has run). None: no episode yet."""
+        evaluation = None if self.evaluation_window is None else self.evaluation_window.mean()
+        if training_cost is None or evaluation is None:
+            return training_cost
+        return [max(train, deterministic) for train, deterministic in zip(training_cost, evaluation)]
 
     def after_gradient_step(self) -> bool:
         """``step`` cadence: one controller update from the window. True if lambda updated."""
         if self.window is None or self.warming_up:
             return False
-        mean_cost = self.window.mean()
+        mean_cost = self.signal(self.window.mean())
         if mean_cost is None:
             return False
         self._set(self.controller.update_floats(mean_cost))

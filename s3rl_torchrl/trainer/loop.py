@@ -467,6 +467,8 @@ class Trainer:
         c.epochs += 1
         start = time.perf_counter()
         result = evaluate(self.test_env, self.agent.actor, cfg.eval.episodes, cfg.eval.max_steps)
+        if self.agent.lagrangian is not None:  # algo.lagrangian_eval_window: part of lambda's J
+            self.agent.lagrangian.observe_evaluation([[cost] for cost in result.episode_costs])
         if self.best.update(
             result.reward_mean, result.cost_mean, cfg.task.cost_limit, c.epochs, c.frames
         ):

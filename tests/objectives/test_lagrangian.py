@@ -366,3 +366,38 @@ def test_updater_step_cadence_by_hand():
     assert other.lagrangian.tolist() == updater.lagrangian.tolist() == pytest.approx([0.22])
     with pytest.raises(ValueError, match="collect, step"):
         LagrangianUpdater(pid, loss, cadence="epoch")
+
+
+def test_updater_eval_window_follows_the_larger_of_training_and_evaluation_cost():
+    # The delivered (deterministic) policy's cost joins lambda's signal: J is the larger of the
+    # training window's mean and the mean of the last `eval_window` evaluation episodes.
+    from s3rl_torchrl.objectives import LagrangianUpdater
+
+    def updater(eval_window):
+        pid = PIDLagrangian(kp=0.0, ki=0.01, kd=0.0, cost_limit=10.0)
+        return LagrangianUpdater(pid, _Loss(), cadence="step", window=2, eval_window=eval_window)
+
+    plain, aimed = updater(0), updater(3)
+    for each in (plain, aimed):
+        each.observe(torch.tensor([[6.0], [8.0]]), 100)  # training mean 7, below the limit
+    assert aimed.signal([7.0]) == [7.0]  # no evaluation yet: the training mean alone
+    plain.observe_evaluation([[40.0]])  # ignored without an evaluation window
+    assert plain.evaluation_window is None
+    aimed.observe_evaluation([[14.0], [16.0]])  # mean 15 > 7
+    assert aimed.signal([7.0]) == [15.0] and aimed.signal([20.0]) == [20.0]
+    assert plain.after_gradient_step() and aimed.after_gradient_step()
+    # integral max(0, 7 - 10) = 0 for the training signal; 15 - 10 = 5 -> lambda 0.05.
+    assert float(plain.lagrangian) == 0.0
+    assert float(aimed.lagrangian) == pytest.approx(0.05)
+    aimed.observe_evaluation([[0.0], [2.0]])  # window 16, 0, 2: mean 6 -> J = max(7, 6) = 7
+    assert aimed.signal([7.0]) == [7.0]
+    # The collect cadence takes the same signal: a batch's mean 8 against the window's 6.
+    collect = LagrangianUpdater(PIDLagrangian(cost_limit=10.0), _Loss(), eval_window=2)
+    collect.observe_evaluation([[12.0], [14.0]])
+    assert collect.observe(torch.tensor([[8.0]]), 100) == [13.0]
+    # The evaluation window is checkpointed with the rest.
+    other = updater(3)
+    other.load_state_dict(aimed.state_dict())
+    assert other.evaluation_window.mean() == aimed.evaluation_window.mean() == [6.0]
+    with pytest.raises(ValueError, match="eval_window"):
+        updater(-1)

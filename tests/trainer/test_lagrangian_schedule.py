@@ -188,3 +188,45 @@ def test_resume_keeps_the_window_and_the_warmup_clock(tiny_config, tmp_path):
     result = resumed.run()
     assert result.counters.lagrangian_updates == full.counters.lagrangian_updates > 0
     assert result.counters.grad_steps == full.counters.grad_steps
+
+
+def test_aimed_controller_holds_a_share_of_the_limit_and_reads_the_evaluations(
+    tiny_config, tmp_path, monkeypatch
+):
+    # algo.lagrangian_target scales the controller's d; algo.lagrangian_eval_window feeds it the
+    # per-episode costs of each epoch's deterministic evaluation (not the final one), which a
+    # resume carries on from the checkpoint.
+    import s3rl_torchrl.trainer.loop as loop
+
+    overrides = (
+        "algo=sac_lag",
+        "task=SafetyHopperVelocity-v0",
+        "task.cost_limit=2",
+        "algo.lagrangian=learned",
+        "algo.lagrangian_cadence=step",
+        "algo.lagrangian_target=0.25",
+        "algo.lagrangian_eval_window=3",
+        "eval.episodes=2",
+    )
+    evaluated: list[list[float]] = []
+    evaluate = loop.evaluate
+
+    def record(env, policy, episodes, max_steps):
+        result = evaluate(env, policy, episodes, max_steps)
+        evaluated.append(list(result.episode_costs))
+        return result
+
+    monkeypatch.setattr(loop, "evaluate", record)
+    trainer = Trainer(tiny_config(*overrides), tmp_path)
+    assert trainer.agent.lagrangian.controller.cost_limit.tolist() == [0.5]
+    epochs = []
+    trainer.register_op("epoch_end", lambda t, row: epochs.append(len(evaluated)))
+    trainer.run()
+    per_epoch = [costs for i, costs in enumerate(evaluated) if i + 1 in epochs]
+    assert len(per_epoch) >= 2 and all(len(costs) == 2 for costs in per_epoch)
+    window = trainer.agent.lagrangian.evaluation_window
+    assert [row[0] for row in window._costs] == [c for costs in per_epoch for c in costs][-3:]
+    restored = loop.Trainer(
+        tiny_config(*overrides, f"resume={tmp_path}"), tmp_path / "ignored"
+    ).agent.lagrangian
+    assert list(restored.evaluation_window._costs) == list(window._costs)
