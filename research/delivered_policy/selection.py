@@ -5,7 +5,7 @@ Each entry is one `s3rl-train` run under `experiment=safe` at 1M frames, seeds 1
 after an interruption, the same command resumes every unfinished run (`resume=auto`) and skips
 the finished ones (`final_eval.json`). Two runs at a time, one thread each (2 cores):
 
-    python research/delivered_policy/queue.py --out /work/runs/delivered_selection
+    python research/delivered_policy/selection.py --out /work/runs/delivered_selection
 
 Candidates (algo.* keys, objectives/lagrangian.py):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);

@@ -4,6 +4,7 @@ analyses of runs as subcommands:
     s3rl-report RUNS [--out DIR] ...                  the report (report.md, figures)
     s3rl-report lagrangian RUN_DIR... [--out ...]     the Lagrange multiplier's dynamics
     s3rl-report compare-runs RUN_A RUN_B [--out ...]  do two runs give the same metrics?
+    s3rl-report before-after --before OLD... --after NEW...   two presets, paired per seed
 
 A first argument naming a subcommand selects it; anything else is the report's ``RUNS`` (a
 directory that happens to be called ``lagrangian`` is written ``./lagrangian``).
@@ -161,9 +162,82 @@ def compare_runs_main(argv: Sequence[str]) -> int:
     return 0
 
 
+def _task_target(text: str) -> tuple[str, tuple[float, float]]:
+    task, _, bars = text.partition("=")
+    reward, sep, cost = bars.partition(",")
+    try:
+        if not task or not sep:
+            raise ValueError
+        return task, (float(reward), float(cost))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected TASK=REWARD,COST (e.g. SafetyPointGoal1-v0=20,25), got {text!r}"
+        ) from None
+
+
+def _algo_count(text: str) -> tuple[str, int]:
+    algo, sep, count = text.partition("=")
+    if not algo or not sep or not count.isdigit():
+        raise argparse.ArgumentTypeError(f"expected ALGO=RUNS (e.g. s3rl=46), got {text!r}")
+    return algo, int(count)
+
+
+def before_after_main(argv: Sequence[str]) -> int:
+    """``s3rl-report before-after``: :func:`s3rl_torchrl.report.before_after.before_after`."""
+    parser = argparse.ArgumentParser(
+        prog="s3rl-report before-after",
+        description=(
+            "The same tasks, algos and seeds under two presets (two sets of result trees), "
+            "paired per seed: mean reward and cost per task and algo before and after, the runs "
+            "within the limit, paired t-tests, and the targets a new preset has to meet."
+        ),
+    )
+    parser.add_argument("--before", nargs="+", required=True, metavar="DIR",
+                        help="the old preset's result trees")
+    parser.add_argument("--after", nargs="+", required=True, metavar="DIR",
+                        help="the new preset's result trees")
+    parser.add_argument("--protocol", default="last", choices=("last", "best_feasible"),
+                        help="which final evaluation (default: last, the policy at the end)")
+    parser.add_argument("--within", action="append", default=[], type=_algo_count,
+                        metavar="ALGO=RUNS",
+                        help="runs of ALGO that must be within the limit after (default: all)")
+    parser.add_argument("--reward-kept", type=float, default=0.85,
+                        help="share of the old reward to keep where the old cost was within the "
+                             "limit (default: 0.85)")
+    parser.add_argument("--task-target", action="append", default=[], type=_task_target,
+                        metavar="TASK=REWARD,COST",
+                        help="least mean reward and most mean cost a task must reach after")
+    parser.add_argument("--out", type=Path, required=True, help="markdown page")
+    parser.add_argument("--json", type=Path, default=None, help="the same as JSON")
+    args = parser.parse_args(argv)
+    from dataclasses import asdict
+
+    from s3rl_torchrl.report.before_after import before_after, write_markdown
+    from s3rl_torchrl.report.records import write_json
+
+    command = shlex.join(["s3rl-report", "before-after", *argv])
+    try:
+        result = before_after(
+            args.before, args.after, args.protocol, within_target=dict(args.within),
+            reward_kept=args.reward_kept, task_targets=dict(args.task_target),
+        )
+    except ReportError as err:
+        print(f"s3rl-report before-after: error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {write_markdown(result, args.out, command)}")
+    if args.json is not None:
+        rows = [{**asdict(row), "within_before": row.within("before"),
+                 "within_after": row.within("after")} for row in result.rows]
+        write_json(args.json, {"protocol": result.protocol, "rows": rows,
+                               "targets": [asdict(t) for t in result.targets],
+                               "unpaired": result.unpaired}, command)
+    return 0
+
+
 SUBCOMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "lagrangian": lagrangian_main,
     "compare-runs": compare_runs_main,
+    "before-after": before_after_main,
 }
 
 

@@ -1,0 +1,233 @@
+"""Before / after: the same tasks, algos and seeds trained under two presets, paired per seed.
+
+``s3rl-report before-after --before OLD... --after NEW...`` reads two sets of result trees
+(e.g. ``results/safe_sound results/table1`` against ``results/table1_v2``) and, per task and
+algo, puts each seed's final evaluation under the old preset beside the same seed's under the
+new one: mean reward and cost, the runs within the limit, a paired t-test per task (reward and
+cost, over the seeds both ran), and the share of the old reward the new preset keeps. Its
+``targets`` are the questions a change of preset has to answer (one row each, met or not): how
+many runs deliver a policy within the limit under each preset, whether the new preset keeps at
+least ``reward_kept`` of the old reward wherever the old one held its limit, and, per named task,
+whether the new mean reward and cost reach a bar.
+
+A run is within its limit when its final evaluation's mean cost is at most the run's
+``task.cost_limit`` (the limit it trained for: 10, or 25 on SafetyPointGoal1).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from s3rl_torchrl.report.runs import PROTOCOLS, ReportError, Run, find_runs
+from s3rl_torchrl.report.stats import TestResult, paired_seed_test
+
+__all__ = ["BeforeAfter", "SeedPair", "Target", "TaskRow", "before_after", "write_markdown"]
+
+
+@dataclass(frozen=True)
+class SeedPair:
+    """One seed's final evaluation (mean over its episodes) under each preset."""
+
+    seed: int
+    before_reward: float
+    before_cost: float
+    after_reward: float
+    after_cost: float
+
+
+@dataclass
+class TaskRow:
+    """One task and algo: the seeds both presets ran to the end."""
+
+    task: str
+    algo: str
+    cost_limit: float
+    pairs: list[SeedPair]
+    reward_test: TestResult = field(init=False)
+    cost_test: TestResult = field(init=False)
+
+    def __post_init__(self) -> None:
+        def by_seed(name: str) -> dict[int, float]:
+            return {p.seed: getattr(p, name) for p in self.pairs}
+
+        # after - before: a negative cost difference is a safer new preset.
+        self.reward_test = paired_seed_test(by_seed("after_reward"), by_seed("before_reward"))
+        self.cost_test = paired_seed_test(by_seed("after_cost"), by_seed("before_cost"))
+
+    def mean(self, name: str) -> float:
+        return float(np.mean([getattr(p, name) for p in self.pairs]))
+
+    def within(self, side: str) -> int:
+        """Runs whose ``side`` ("before" or "after") cost is within the limit."""
+        return sum(getattr(p, f"{side}_cost") <= self.cost_limit for p in self.pairs)
+
+    @property
+    def reward_kept(self) -> float:
+        """New mean reward over old (NaN when the old one is not positive)."""
+        before = self.mean("before_reward")
+        return self.mean("after_reward") / before if before > 0 else math.nan
+
+
+@dataclass(frozen=True)
+class Target:
+    """One question about the new preset, with the numbers that answer it."""
+
+    name: str
+    value: str
+    met: bool
+
+
+@dataclass
+class BeforeAfter:
+    protocol: str
+    rows: list[TaskRow]
+    targets: list[Target]
+    unpaired: list[str]  # (task, algo, seed) found on one side only, or unfinished
+
+    def within(self, algo: str, side: str) -> tuple[int, int]:
+        rows = [r for r in self.rows if r.algo == algo]
+        return sum(r.within(side) for r in rows), sum(len(r.pairs) for r in rows)
+
+    @property
+    def algos(self) -> list[str]:
+        return sorted({r.algo for r in self.rows})
+
+
+def _finals(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
+    runs: dict[tuple[str, str, int], Run] = {}
+    for root in roots:
+        for run in find_runs(root):
+            key = (run.task, run.algo, run.seed)
+            if key in runs:
+                raise ReportError(
+                    f"{run.task} {run.algo} seed {run.seed} is in {runs[key].path} and in "
+                    f"{run.path}: give each preset's runs once."
+                )
+            runs[key] = run
+    return runs
+
+
+def _evaluation(run: Run, protocol: str) -> dict | None:
+    if run.final is None:
+        return None
+    return run.final if protocol == "last" else run.final.get(protocol)
+
+
+def before_after(
+    before: Sequence[str | Path],
+    after: Sequence[str | Path],
+    protocol: str = "last",
+    *,
+    within_target: Mapping[str, int] | None = None,
+    reward_kept: float = 0.85,
+    task_targets: Mapping[str, tuple[float, float]] | None = None,
+) -> BeforeAfter:
+    """Pair the runs of ``before`` and ``after`` (result trees) by task, algo and seed.
+
+    Args:
+        protocol: ``last`` (the policy at the end of training) or ``best_feasible``.
+        within_target: per algo, the runs (of those paired) that must be within the limit
+            under the new preset; default: all of them.
+        reward_kept: the share of the old mean reward the new preset must keep on every task
+            and algo whose old mean cost was within the limit.
+        task_targets: task -> (least mean reward, most mean cost) the new preset must reach,
+            for each algo.
+    """
+    if protocol not in PROTOCOLS:
+        raise ReportError(f"Unknown protocol {protocol!r}; valid: {', '.join(PROTOCOLS)}.")
+    old, new = _finals(before), _finals(after)
+    paired: dict[tuple[str, str], list[SeedPair]] = {}
+    limits: dict[tuple[str, str], float] = {}
+    unpaired = []
+    for key in sorted(set(old) | set(new)):
+        a = _evaluation(old[key], protocol) if key in old else None
+        b = _evaluation(new[key], protocol) if key in new else None
+        if a is None or b is None:
+            unpaired.append(f"{key[0]} {key[1]} seed {key[2]}")
+            continue
+        if old[key].cost_limit != new[key].cost_limit:
+            raise ReportError(
+                f"{key[0]} {key[1]} seed {key[2]}: the cost limit is {old[key].cost_limit} "
+                f"before and {new[key].cost_limit} after; a comparison needs one limit."
+            )
+        paired.setdefault(key[:2], []).append(
+            SeedPair(key[2], float(a["reward_mean"]), float(a["cost_mean"]),
+                     float(b["reward_mean"]), float(b["cost_mean"]))
+        )
+        limits[key[:2]] = new[key].cost_limit
+    if not paired:
+        raise ReportError(
+            "No task, algo and seed has a finished run on both sides: nothing to compare."
+        )
+    rows = [TaskRow(task, algo, limits[task, algo], pairs)
+            for (task, algo), pairs in sorted(paired.items())]
+    result = BeforeAfter(protocol, rows, [], unpaired)
+
+    for algo in result.algos:
+        within, total = result.within(algo, "after")
+        before_within, _ = result.within(algo, "before")
+        need = total if within_target is None else within_target.get(algo, total)
+        result.targets.append(Target(
+            f"{algo}: runs within the limit (after; before {before_within} of {total})",
+            f"{within} of {total} (target >= {need})", within >= need))
+    for row in rows:
+        if row.mean("before_cost") <= row.cost_limit:
+            kept = row.reward_kept
+            result.targets.append(Target(
+                f"{row.algo} {row.task}: reward kept (the old mean cost was within the limit)",
+                f"{kept:.2f} of {row.mean('before_reward'):.1f} (target >= {reward_kept:.2f})",
+                bool(kept >= reward_kept)))
+    for task, (least_reward, most_cost) in (task_targets or {}).items():
+        for row in (r for r in rows if r.task == task):
+            reward, cost = row.mean("after_reward"), row.mean("after_cost")
+            result.targets.append(Target(
+                f"{row.algo} {task}: mean reward and cost (after)",
+                f"{reward:.2f} / {cost:.2f} (target reward >= {least_reward:g}, "
+                f"cost <= {most_cost:g})",
+                reward >= least_reward and cost <= most_cost))
+    return result
+
+
+def _cell(test: TestResult) -> str:
+    if math.isnan(test.pvalue):
+        return f"{test.difference:+.2f} (—)"
+    return f"{test.difference:+.2f} (p {test.pvalue:.2f})"
+
+
+def write_markdown(result: BeforeAfter, path: str | Path, command: str = "") -> Path:
+    """The comparison as a markdown page: the targets, then one row per task and algo."""
+    lines = [f"# Before / after: {PROTOCOLS[result.protocol]}", ""]
+    if command:
+        lines += [f"Written by `{command}`.", ""]
+    lines += ["| target | value | met |", "|---|---|---|"]
+    lines += [f"| {t.name} | {t.value} | {'yes' if t.met else 'no'} |" for t in result.targets]
+    lines += [
+        "",
+        "Per task and algo, the mean over the seeds both presets ran (reward / cost), the runs "
+        "within the limit, and the paired difference after - before with its t-test's p-value:",
+        "",
+        "| task | algo | seeds | before | after | within before | within after "
+        "| reward diff | cost diff |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in result.rows:
+        n = len(row.pairs)
+        lines.append(
+            f"| {row.task} | {row.algo} | {','.join(str(p.seed) for p in row.pairs)} "
+            f"| {row.mean('before_reward'):.1f} / {row.mean('before_cost'):.1f} "
+            f"| {row.mean('after_reward'):.1f} / {row.mean('after_cost'):.1f} "
+            f"| {row.within('before')}/{n} | {row.within('after')}/{n} "
+            f"| {_cell(row.reward_test)} | {_cell(row.cost_test)} |"
+        )
+    if result.unpaired:
+        lines += ["", "Not paired (on one side only, or unfinished): "
+                  + "; ".join(result.unpaired) + "."]
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -1,0 +1,103 @@
+"""s3rl-report before-after: two presets' runs paired per task, algo and seed, checked against
+numbers computed by hand and scipy's paired t-test."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from scipy import stats
+
+from s3rl_torchrl.report.before_after import before_after
+from s3rl_torchrl.report.cli import main
+from s3rl_torchrl.report.runs import ReportError
+
+TASK = "SafetyHalfCheetahVelocity-v1"
+
+
+def episodes(reward: float, cost: float) -> dict:
+    # Two episodes whose means are (reward, cost).
+    return {"rewards": [reward - 1, reward + 1], "costs": [cost, cost],
+            "lengths": [50, 50], "safe_steps": [50, 50]}
+
+
+@pytest.fixture
+def trees(tmp_path, make_run):
+    # Before: seeds 10/20/30 of sac_lag cost 4, 12, 30 (one within 10) at reward 100, 120, 140;
+    # after: cost 3, 8, 9 (all within) at reward 90, 110, 100. s3rl: one seed on each side only,
+    # and a finished-before / unfinished-after seed.
+    before, after = tmp_path / "before", tmp_path / "after"
+    for seed, (r0, c0, r1, c1) in zip((10, 20, 30), [(100, 4, 90, 3), (120, 12, 110, 8),
+                                                     (140, 30, 100, 9)]):
+        make_run(before / f"sac_lag/seed{seed}", TASK, "sac_lag", seed, episodes(r0, c0))
+        make_run(after / f"sac_lag/seed{seed}", TASK, "sac_lag", seed, episodes(r1, c1))
+    make_run(before / "s3rl/seed10", TASK, "s3rl", 10, episodes(50, 5))
+    make_run(after / "s3rl/seed10", TASK, "s3rl", 10, episodes(40, 6))
+    make_run(before / "s3rl/seed20", TASK, "s3rl", 20, episodes(50, 5))
+    make_run(after / "s3rl/seed20", TASK, "s3rl", 20, episodes(50, 5), finished=False)
+    make_run(after / "s3rl/seed30", TASK, "s3rl", 30, episodes(50, 5))
+    return before, after
+
+
+def test_pairs_by_seed_and_counts_runs_within_the_limit(trees):
+    before, after = trees
+    result = before_after([before], [after], within_target={"sac_lag": 3})
+    sac = next(r for r in result.rows if r.algo == "sac_lag")
+    assert [p.seed for p in sac.pairs] == [10, 20, 30]
+    assert sac.within("before") == 1 and sac.within("after") == 3
+    assert sac.mean("before_cost") == pytest.approx(46 / 3)
+    expected = stats.ttest_rel([3, 8, 9], [4, 12, 30])
+    assert sac.cost_test.difference == pytest.approx((3 + 8 + 9 - 4 - 12 - 30) / 3)
+    assert sac.cost_test.pvalue == pytest.approx(expected.pvalue)
+    assert result.within("sac_lag", "after") == (3, 3)
+    s3rl = next(r for r in result.rows if r.algo == "s3rl")
+    assert [p.seed for p in s3rl.pairs] == [10]
+    assert math.isnan(s3rl.cost_test.pvalue)  # one pair: no test
+    assert result.unpaired == [f"{TASK} s3rl seed 20", f"{TASK} s3rl seed 30"]
+    targets = {t.name.split(":")[0]: t for t in result.targets}
+    assert targets["sac_lag"].met and targets["s3rl"].met  # 3 of 3; s3rl: 1 of 1 by default
+    # Reward kept only where the old mean cost was within the limit: s3rl (5 <= 10), 40 / 50.
+    kept = [t for t in result.targets if "reward kept" in t.name]
+    assert [t.name.split()[0] for t in kept] == ["s3rl"] and not kept[0].met
+    assert "0.80 of 50.0" in kept[0].value
+
+
+def test_task_targets_and_the_best_feasible_protocol(trees, make_run):
+    before, after = trees
+    result = before_after([before], [after], task_targets={TASK: (100, 6)})
+    bars = {t.name.split()[0]: t for t in result.targets if "mean reward and cost" in t.name}
+    assert not bars["sac_lag"].met  # 100 / 6.67: the reward bar is met, the cost bar is not...
+    assert "100.00 / 6.67" in bars["sac_lag"].value and bars["s3rl"].value.startswith("40.00")
+    # ... while no run has a best-feasible evaluation: nothing to pair under that protocol.
+    with pytest.raises(ReportError, match="nothing to compare"):
+        before_after([before], [after], "best_feasible")
+
+
+def test_a_seed_given_twice_or_under_two_limits_is_refused(trees, make_run, tmp_path):
+    before, after = trees
+    with pytest.raises(ReportError, match="give each preset's runs once"):
+        before_after([before, before], [after])
+    other = make_run(tmp_path / "limit/seed10", TASK, "sac_lag", 10, episodes(1, 1),
+                     task__cost_limit=25.0)
+    with pytest.raises(ReportError, match="one limit"):
+        before_after([before / "sac_lag"], [other.parent])
+
+
+def test_cli_writes_the_page_and_the_json(trees, tmp_path, capsys):
+    before, after = trees
+    out, record = tmp_path / "ba.md", tmp_path / "ba.json"
+    assert main(["before-after", "--before", str(before), "--after", str(after),
+                 "--within", "sac_lag=2", "--task-target", f"{TASK}=20,25",
+                 "--out", str(out), "--json", str(record)]) == 0
+    page = out.read_text()
+    assert "| sac_lag: runs within the limit (after; before 1 of 3) | 3 of 3 (target >= 2) | yes |" \
+        in page
+    data = json.loads(record.read_text())
+    assert [r["within_after"] for r in data["rows"]] == [1, 3]  # s3rl, sac_lag (sorted)
+    assert main(["before-after", "--before", str(before), "--after", str(tmp_path / "none"),
+                 "--out", str(out)]) == 2
+    assert "is not a directory" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["before-after", "--before", str(before), "--after", str(after), "--out",
+              str(out), "--task-target", "bad"])
