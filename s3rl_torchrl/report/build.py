@@ -223,13 +223,21 @@ def _table1_full(by_task: dict[str, list[RunGroup]]) -> list[str]:
     """The paper's Table 1, every task in its order with each of its algos' rows, and ours
     beside each under both protocols ("–" where this report has no finished run of it)."""
     table1 = [v for v in load_paper_results() if v.table == "Table 1" and v.algo]
+    # The last policy and FSRL's best-feasible checkpoint always; the delivered pick where a
+    # run of the report has one (eval.delivery_epochs).
+    protocols = {
+        protocol: label for protocol, label in PROTOCOLS.items()
+        if protocol != "delivered" or any(
+            under_protocol(g, protocol) is not None for groups in by_task.values() for g in groups
+        )
+    }
     rows = []
     for paper_task in dict.fromkeys(v.task for v in table1):
         ours = {g.algo: g for g in _finished_groups_of(by_task, paper_task) if not g.extra}
         for algo in dict.fromkeys(v.algo for v in table1):
             paper = {v.metric: v for v in table1 if v.task == paper_task and v.algo == algo}
             cells = []
-            for protocol in PROTOCOLS:
+            for protocol in protocols:
                 read = under_protocol(ours[algo], protocol) if algo in ours else None
                 if read is None or not read.finished:
                     cells.append("–")
@@ -240,15 +248,15 @@ def _table1_full(by_task: dict[str, list[RunGroup]]) -> list[str]:
                              + f" ({len(s.seeds)})")
             rows.append([paper_task, paper["reward"].method,
                          f"{paper['reward'].mean:.2f} / {paper['cost'].mean:.2f}", *cells])
-    if all(row[-2] == "–" for row in rows):
+    if all(row[3] == "–" for row in rows):
         return []
     header = ["task (the paper's id)", "algo", "paper: reward / cost",
-              *(f"ours, {label}: reward / cost (seeds)" for label in PROTOCOLS.values())]
+              *(f"ours, {label}: reward / cost (seeds)" for label in protocols.values())]
     return ["### Table 1 in full", "",
             "Every task and algo of the paper's Table 1, in its order; ours are means over the "
             f"pooled final-evaluation episodes; {OVER_LIMIT}: over the cost limit (mean over "
             "seeds); –: no finished run of it in this report.", "",
-            *_table(header, rows, "llrrr"), ""]
+            *_table(header, rows, "lll" + "r" * len(protocols)), ""]
 
 
 def _paper(value, digits: int = 2) -> str:

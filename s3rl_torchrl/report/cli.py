@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from s3rl_torchrl.report.runs import ReportError, export_runs
+from s3rl_torchrl.report.runs import PROTOCOLS, ReportError, export_runs
 
 
 def _positive(text: str) -> int:
@@ -196,8 +196,10 @@ def before_after_main(argv: Sequence[str]) -> int:
                         help="the old preset's result trees")
     parser.add_argument("--after", nargs="+", required=True, metavar="DIR",
                         help="the new preset's result trees")
-    parser.add_argument("--protocol", default="last", choices=("last", "best_feasible"),
-                        help="which final evaluation (default: last, the policy at the end)")
+    parser.add_argument("--protocol", default="last", choices=tuple(PROTOCOLS),
+                        help="which final evaluation (default: last, the policy at the end; "
+                             "best_feasible: FSRL's checkpoint; delivered: eval.delivery_epochs' "
+                             "pick)")
     parser.add_argument("--within", action="append", default=[], type=_algo_count,
                         metavar="ALGO=RUNS",
                         help="runs of ALGO that must be within the limit after (default: all)")

@@ -139,12 +139,14 @@ class RunGroup:
 
 
 #: How a run's final evaluation was taken (``final_eval.json``): the policy at the end of
-#: training (the top level), or the best-feasible checkpoint FSRL's trainer keeps
+#: training (the top level), the best-feasible checkpoint FSRL's trainer keeps
 #: (``best_feasible``, trainer.evaluation.BestFeasible), which may be how the paper's Table 1
-#: was made.
+#: was made, or the policy picked among the last epochs' (``delivered``, eval.delivery_epochs).
 PROTOCOLS = {
     "last": "last policy",
     "best_feasible": "best-feasible checkpoint (FSRL's rule)",
+    # eval.delivery_epochs: picked among the last epochs' policies on episodes of its own.
+    "delivered": "delivered policy (picked among the last epochs')",
 }
 
 

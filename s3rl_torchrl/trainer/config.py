@@ -147,11 +147,24 @@ class EvalConfig:
     # rollout of each test env holds one whole episode.
     max_steps: int | None = None
     random_baseline: bool = True  # add a random-policy row to the final table
+    # The delivered policy (trainer.evaluation.DeliveryCandidates; docs/recipes.md): 0 delivers
+    # the last policy alone; K > 0 also keeps the policies of the last K epochs and, after
+    # training, evaluates each on delivery_episodes fresh episodes and delivers the one with the
+    # highest reward among those whose cost is at most delivery_cost_share x task.cost_limit
+    # (none: the cheapest), evaluated again on final_episodes other episodes.
+    delivery_epochs: int = 0
+    delivery_episodes: int = 5
+    delivery_cost_share: float = 1.0
 
     def check(self, path: str) -> None:
         check_range(f"{path}.num_envs", self.num_envs, 1)
         check_range(f"{path}.episodes", self.episodes, 1)
         check_range(f"{path}.final_episodes", self.final_episodes, 1)
+        check_range(f"{path}.delivery_epochs", self.delivery_epochs, 0)
+        check_range(f"{path}.delivery_episodes", self.delivery_episodes, 1)
+        check_range(
+            f"{path}.delivery_cost_share", self.delivery_cost_share, 0.0, 1.0, low_inclusive=False
+        )
         if self.max_steps is not None:
             check_range(f"{path}.max_steps", self.max_steps, 1)
 

@@ -5,9 +5,12 @@ from __future__ import annotations
 import json
 import math
 import statistics
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from copy import deepcopy
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 from tensordict import TensorDictBase
@@ -133,6 +136,53 @@ class BestFeasible:
         if better:
             self.reward, self.cost, self.epoch, self.frames = reward, cost, epoch, frames
         return better
+
+
+class DeliveryCandidates:
+    """The policies of the last ``epochs`` epochs (``eval.delivery_epochs``), from which a run
+    picks the one it delivers after training (:func:`pick_delivered`).
+
+    The multiplier holds the *training* policy's cost near its target; the deterministic
+    policy of any one epoch can sit on either side of it, far above on some tasks, so the last
+    epoch's is a draw. Picking among the last few epochs' policies on fresh episodes each, and
+    reporting the pick on other episodes, delivers one that has shown its cost.
+    """
+
+    def __init__(self, epochs: int):
+        if isinstance(epochs, bool) or not isinstance(epochs, int) or epochs < 1:
+            raise ValueError(f"epochs must be an integer >= 1, got {epochs!r}.")
+        self.epochs = epochs
+        self.candidates: deque[dict[str, Any]] = deque(maxlen=epochs)
+
+    def add(self, epoch: int, frames: int, policy: torch.nn.Module) -> None:
+        """Keep a copy of ``policy``'s weights as this epoch's candidate."""
+        weights = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+        self.candidates.append({"epoch": int(epoch), "frames": int(frames), "weights": weights})
+
+    def policies(self, policy: torch.nn.Module) -> Iterator[tuple[dict[str, Any], torch.nn.Module]]:
+        """Each candidate (oldest first) as a copy of ``policy`` holding its weights."""
+        for candidate in self.candidates:
+            copy = deepcopy(policy)
+            copy.load_state_dict(candidate["weights"])
+            yield candidate, copy
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"epochs": self.epochs, "candidates": list(self.candidates)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.candidates = deque(state["candidates"], maxlen=self.epochs)
+
+
+def pick_delivered(results: Sequence[EvalResult], cost_limit: float) -> tuple[int, bool]:
+    """The index of the result to deliver and whether it is within ``cost_limit``: the highest
+    mean reward among those whose mean cost is at most the limit (the later one on a tie), or,
+    if none is, the lowest mean cost (the later one on a tie)."""
+    if not results:
+        raise ValueError("no candidate to pick from")
+    feasible = [i for i, r in enumerate(results) if r.cost_mean <= cost_limit]
+    if feasible:
+        return max(feasible, key=lambda i: (results[i].reward_mean, i)), True
+    return min(range(len(results)), key=lambda i: (results[i].cost_mean, -i)), False
 
 
 # The paper's training budget ("1M steps", experiment=paper): shorter runs are not converged.

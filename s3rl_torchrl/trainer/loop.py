@@ -77,11 +77,13 @@ from s3rl_torchrl.trainer.config import TrainConfig, saved_train_config, to_cont
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.evaluation import (
     BestFeasible,
+    DeliveryCandidates,
     EvalResult,
     RandomPolicy,
     constraint_verdict,
     evaluate,
     format_table,
+    pick_delivered,
 )
 from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
 from s3rl_torchrl.trainer.resume import RESUME_LOCKED, config_changes
@@ -261,6 +263,8 @@ class Trainer:
             self.register_op("epoch_end", on_epoch_end)
         self.counters = Counters()
         self.best = BestFeasible()
+        epochs = cfg.eval.delivery_epochs
+        self.delivery = DeliveryCandidates(epochs) if epochs else None  # eval.delivery_epochs
         # The collector and, until it is built on resume, the checkpoint's collector state.
         self._collector: ResumableCollector | None = None
         self._resume_collector: dict[str, Any] | None = None
@@ -473,6 +477,8 @@ class Trainer:
             result.reward_mean, result.cost_mean, cfg.task.cost_limit, c.epochs, c.frames
         ):
             self._save_best()
+        if self.delivery is not None:
+            self.delivery.add(c.epochs, c.frames, self.agent.actor)
         row = self._epoch_row(result, time.perf_counter() - start)
         for op in self._ops["after_evaluation"]:  # hooks: probes, critic diagnostics
             row.update(op(row))
@@ -533,6 +539,7 @@ class Trainer:
             return None
         saved = json.loads(path.read_text())
         saved.pop("best_feasible", None)
+        saved.pop("delivered", None)
         result = EvalResult(**saved)
         label = f"{self.cfg.algo.name} {self.cfg.task.name} seed {self.cfg.seed}"
         table = format_table(
@@ -567,6 +574,13 @@ class Trainer:
                 f"{self.best.epoch}, {self.best.frames} frames; FSRL's rule)"
             ] = best
             saved["best_feasible"] = {**best.to_dict(), **asdict(self.best), "feasible": feasible}
+        if self.delivery is not None and self.delivery.candidates:
+            delivered, record = self._delivered_evaluation(episodes, max_steps)
+            rows[
+                f"delivered policy (epoch {record['epoch']}, {record['frames']} frames; picked "
+                f"among the last {len(record['candidates'])} epochs' policies)"
+            ] = delivered
+            saved["delivered"] = {**delivered.to_dict(), **record}
         Path(self.run_dir / FINAL_EVAL_FILE).write_text(json.dumps(saved, indent=2) + "\n")
         if cfg.eval.random_baseline:
             rows["random policy (reference)"] = evaluate(
@@ -577,6 +591,34 @@ class Trainer:
         verdict = constraint_verdict(result.cost_mean, cfg.task.cost_limit, c.frames)
         print(f"\n{table}\n\n{verdict}\n\nRun directory: {self.run_dir}\n")
         return result
+
+    def _delivered_evaluation(
+        self, episodes: int, max_steps: int | None
+    ) -> tuple[EvalResult, dict[str, Any]]:
+        """``eval.delivery_epochs``: each kept policy evaluated on ``eval.delivery_episodes``
+        fresh episodes, the pick (:func:`pick_delivered`) evaluated again on ``episodes``
+        others, so that the reported numbers are not those it was picked on."""
+        cfg = self.cfg
+        limit = cfg.eval.delivery_cost_share * cfg.task.cost_limit
+        candidates, policies, results = [], [], []
+        for candidate, policy in self.delivery.policies(self.agent.actor):
+            candidates.append(candidate)
+            policies.append(policy)
+            results.append(evaluate(self.test_env, policy, cfg.eval.delivery_episodes, max_steps))
+        index, feasible = pick_delivered(results, limit)
+        delivered = evaluate(self.test_env, policies[index], episodes, max_steps)
+        record = {
+            "epoch": candidates[index]["epoch"],
+            "frames": candidates[index]["frames"],
+            "pick_cost_limit": limit,
+            "picked_within": feasible,
+            "candidates": [
+                {"epoch": c["epoch"], "frames": c["frames"], "reward": r.reward_mean,
+                 "cost": r.cost_mean}
+                for c, r in zip(candidates, results, strict=True)
+            ],
+        }
+        return delivered, record
 
     def _interrupted(self, progress) -> TrainResult:
         self.save()
@@ -600,6 +642,7 @@ class Trainer:
             else None,
             "rng": capture_rng_state(),
             "best_feasible": asdict(self.best),
+            "delivery": self.delivery.state_dict() if self.delivery is not None else None,
             "hooks": {name: hook.state_dict() for name, hook in self._hooks.items()},
             # What the next batch and the epoch's row depend on besides the networks: the
             # envs' simulators and generators and the collector's carrier (None where a task
@@ -656,6 +699,8 @@ class Trainer:
         self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         self.best = BestFeasible(**state.get("best_feasible", {}))
+        if self.delivery is not None and state.get("delivery") is not None:
+            self.delivery.load_state_dict(state["delivery"])
         self.updates.load_state_dict(state.get("updates") or {})
         hooks = state.get("hooks")
         if hooks is None:  # written before the hooks: the critic diagnostics' episodes had a key

@@ -29,6 +29,7 @@ RESUME_LOCKED = [
     "algo.name",
     "algo.lagrangian",
     "algo.lagrangian_cadence",
+    "algo.lagrangian_eval_window",  # the Lagrangian's checkpointed windows
     "algo.contrastive",
     # What every stored step carries (a graded label, hooks/labels.py) and how the buffer is
     # partitioned: the buffer and the n-step transform's held frames were written with them.

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -515,3 +516,31 @@ def test_critic_diagnostics_table_and_figure_by_hand(tmp_path, make_run, monkeyp
     assert styles[("sac_lag (1 seeds)", "-")] == new["critic/cost_q"]
     assert [y for (label, s), y in styles.items() if s == "--"] == [new["critic/cost_return"]]
     assert styles[("s3rl (1 seeds)", ":")] == old["train/cost_q"]
+
+
+def test_delivered_protocol_adds_its_rows_and_column_only_where_runs_have_it(tmp_path, make_run):
+    """eval.delivery_epochs' pick (final_eval.json's ``delivered``) is read as a third protocol:
+    a Table 1 row of its own and a column of "Table 1 in full"; reports of runs without it keep
+    their two columns."""
+    for algo in ("s3rl", "sac_lag"):
+        for seed in (1, 2):
+            run = make_run(tmp_path / "runs" / f"{algo}_seed{seed}", TASK, algo, seed)
+            final = json.loads((run / "final_eval.json").read_text())
+            final["delivered"] = {**final, "reward_mean": 100.0 + seed, "episode_rewards":
+                                  [100.0 + seed] * 4, "epoch": 3, "frames": 600}
+            (run / "final_eval.json").write_text(json.dumps(final))
+    text = build_report(tmp_path / "runs", tmp_path / "report", embeddings=False,
+                        aggregate=False).path.read_text()
+    label = "delivered policy (picked among the last epochs')"
+    table1 = [line for line in text.splitlines() if line.startswith(f"| {TASK} | s3rl | 2 |")]
+    assert table1[-1].rstrip(" |").endswith(label) and "| 101.50 ± 0.71 |" in table1[-1]
+    full = text.split("### Table 1 in full")[1].split("\n## ")[0]
+    assert f"ours, {label}: reward / cost (seeds)" in full
+    assert "| 101.50 / 1.50 (2) |" in full
+    old = build_report(tmp_path / "runs" / "s3rl_seed1", tmp_path / "old", embeddings=False,
+                       aggregate=False).path.read_text()
+    assert label in old  # the one run has it too; a run without it:
+    make_run(tmp_path / "plain" / "s3rl_seed1", TASK, "s3rl", 1)
+    plain = build_report(tmp_path / "plain", tmp_path / "plain_report", embeddings=False,
+                         aggregate=False).path.read_text()
+    assert label not in plain
