@@ -13,6 +13,9 @@ Candidates (algo.* keys, objectives/lagrangian.py):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
+Every run also keeps its last 10 epochs' policies and delivers one picked on 5 fresh episodes
+each (eval.delivery_epochs; final_eval.json's `delivered`, beside the last policy), so that the
+two ways of keeping the delivered policy within the limit are read on the same runs.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ CASES = [
 ]
 SEEDS = [1, 2]
 FRAMES = 500_000
+DELIVERY = ["eval.delivery_epochs=10", "eval.delivery_episodes=5"]
 
 
 def jobs(out: Path):
@@ -56,6 +60,7 @@ def jobs(out: Path):
             f"seed={seed}",
             f"collector.total_frames={FRAMES}",
             *overrides,
+            *DELIVERY,
             "threads=1",
             "save_interval=2",
             "logger.progress_bar=false",
