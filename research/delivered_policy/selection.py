@@ -2,14 +2,14 @@
 
 Each entry is one `s3rl-train` run under `experiment=safe` at 500k frames (a 1M-frame run takes
 ~77 min on one core of the 2-core machine, and the committed runs' delivered-policy failures
-already show in their evaluations before 500k), seeds 1 and 2 only (the reported seeds are 10,
-20 and 30), in `<out>/<candidate>/<algo>_<task>/seed<N>`. Run again
-after an interruption, the same command resumes every unfinished run (`resume=auto`) and skips
-the finished ones (`final_eval.json`). Two runs at a time, one thread each (2 cores):
+already show in their evaluations before 500k; SafetyPointGoal1 at 1M, where its target is),
+seeds 1 and 2 only (the reported seeds are 10, 20 and 30), in
+`<out>/<candidate>/<algo>_<task>/seed<N>`. Run again after an interruption, the same command
+resumes every unfinished run (`resume=auto`) and skips the finished ones (`final_eval.json`). Two runs at a time, one thread each (2 cores):
 
     python research/delivered_policy/selection.py --out /work/runs/delivered_selection
 
-Candidates (algo.* keys, objectives/lagrangian.py):
+Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
@@ -32,41 +32,49 @@ CANDIDATES = {
     "margin": ["algo.lagrangian_target=0.7"],
     "aim": ["algo.lagrangian_target=0.8", "algo.lagrangian_eval_window=6"],
 }
-# The (algo, task) groups whose delivered policy missed the limit in results/table1 and
-# results/safe_sound, in the order they run: the largest misses first.
+# SafetyPointGoal1 stops moving once lambda passes 0.14-0.21 (its cost critic, read through the
+# max of its pair, reads 12-16 against a reward critic of ~2): two ways to keep the penalty
+# commensurate with a goal reward of ~0.025 a step, at the full 1M frames its target is set at.
+GOAL_CANDIDATES = {
+    "goal_mean": ["algo.cost_critic_read=mean"],  # the pair's mean: no premium on the unvisited
+    "goal_bound": ["algo.lagrangian_max=0.1"],  # below where every committed seed stopped
+}
+FRAMES = 500_000
+# (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
+# results/table1 and results/safe_sound, in the order they run, the largest misses first.
 CASES = [
-    ("sac_lag", "SafetyPointCircle1-v0"),  # seed 10: training cost 16.6, delivered 187.8
-    ("s3rl", "SafetySwimmerVelocity-v1"),  # every seed: 28.2 / 21.8 / 26.7
-    ("s3rl", "SafetyCarCircle-v0"),  # every seed: 42.3 / 38.8 / 30.8
-    ("sac_lag", "SafetySwimmerVelocity-v1"),  # seed 30: 127.2
-    ("s3rl", "SafetyAntVelocity-v1"),  # seeds 10 / 20: 18.4 / 23.6
-    ("s3rl", "SafetyWalker2dVelocity-v1"),  # seed 10: 16.6
-    ("sac_lag", "SafetyBallRun-v0"),  # seed 20: a late lambda cycle
+    ("sac_lag", "SafetyPointCircle1-v0", CANDIDATES, FRAMES),  # seed 10: 16.6 -> 187.8
+    ("sac_lag", "SafetyPointGoal1-v0", GOAL_CANDIDATES, 1_000_000),  # stops moving by 610k
+    ("s3rl", "SafetySwimmerVelocity-v1", CANDIDATES, FRAMES),  # every seed: 28.2 / 21.8 / 26.7
+    ("s3rl", "SafetyCarCircle-v0", CANDIDATES, FRAMES),  # every seed: 42.3 / 38.8 / 30.8
+    ("sac_lag", "SafetySwimmerVelocity-v1", CANDIDATES, FRAMES),  # seed 30: 127.2
+    ("s3rl", "SafetyPointGoal1-v0", GOAL_CANDIDATES, 1_000_000),
+    ("s3rl", "SafetyAntVelocity-v1", CANDIDATES, FRAMES),  # seeds 10 / 20: 18.4 / 23.6
+    ("s3rl", "SafetyWalker2dVelocity-v1", CANDIDATES, FRAMES),  # seed 10: 16.6
+    ("sac_lag", "SafetyBallRun-v0", CANDIDATES, FRAMES),  # seed 20: a late lambda cycle
 ]
 SEEDS = [1, 2]
-FRAMES = 500_000
 DELIVERY = ["eval.delivery_epochs=10", "eval.delivery_episodes=5"]
 
 
 def jobs(out: Path):
-    for seed, (algo, task), (name, overrides) in itertools.product(
-        SEEDS, CASES, CANDIDATES.items()
-    ):
-        run_dir = out / name / f"{algo}_{task}" / f"seed{seed}"
-        yield run_dir, [
-            "experiment=safe",
-            f"task={task}",
-            f"algo={algo}",
-            f"seed={seed}",
-            f"collector.total_frames={FRAMES}",
-            *overrides,
-            *DELIVERY,
-            "threads=1",
-            "save_interval=2",
-            "logger.progress_bar=false",
-            "resume=auto",
-            f"hydra.run.dir={run_dir}",
-        ]
+    for seed, (algo, task, candidates, frames) in itertools.product(SEEDS, CASES):
+        for name, overrides in candidates.items():
+            run_dir = out / name / f"{algo}_{task}" / f"seed{seed}"
+            yield run_dir, [
+                "experiment=safe",
+                f"task={task}",
+                f"algo={algo}",
+                f"seed={seed}",
+                f"collector.total_frames={frames}",
+                *overrides,
+                *DELIVERY,
+                "threads=1",
+                "save_interval=2",
+                "logger.progress_bar=false",
+                "resume=auto",
+                f"hydra.run.dir={run_dir}",
+            ]
 
 
 def run(job) -> str:
