@@ -29,7 +29,7 @@ its lambda updates up to there, no final evaluation): a 1M-frame run then counts
 
 ``make report`` runs it on the runs kept in ``results/`` (docs/results.md); the study that
 launches the runs of a controller comparison and the synthetic plant are
-``benchmarks/studies/lagrangian_dynamics.py``.
+``research/studies/lagrangian_dynamics.py``.
 """
 
 from __future__ import annotations
