@@ -17,7 +17,7 @@ STAMP := $(VENV)/.installed-$(EXTRAS)
 # pytest-xdist workers for make test / test-fast (0: one process).
 WORKERS ?= 2
 
-.PHONY: setup train test test-fast lint bench report clean
+.PHONY: setup train test test-fast lint bench report research-report clean
 
 $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -39,7 +39,7 @@ train: $(STAMP)
 	$(BIN)/s3rl-train $(ARGS)
 
 lint: $(STAMP)
-	$(BIN)/ruff check s3rl_torchrl recipes tests benchmarks docs
+	$(BIN)/ruff check s3rl_torchrl recipes tests benchmarks docs research
 
 # Every test (CI runs this); test-fast leaves out the ones marked slow (end-to-end runs).
 test: $(STAMP) lint
@@ -53,60 +53,63 @@ test-fast: $(STAMP) lint
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py $(ARGS)
 
-# S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
-GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
-BINARY = s3rl (algo.contrastive_cfg.label=binary)
-
-# Rebuild the reports in docs/ from the small result files kept in results/ (config.json,
-# metrics.csv, final_eval.json per run; docs/results.md): the Table 1 reproduction and the
-# Table 2 comparison of algorithms, the experiment=safe evidence (results/safe: FSRL's critics;
-# results/safe_sound: the sound critics, the preset since issue 35; results/safe_sound_hopper_max:
-# Hopper's first sound-critic runs, under the max read replaced by selection round 5), and the 300k-frame
-# experiment=safe runs (SafetyPointGoal1, graded labels).
-# What the critic selection's runs differ in besides the task (configs/sweep/critic_*.yaml).
-SELECTION_GROUPS = --group-by algo.cost_critic_read --group-by algo.cost_nonnegative \
-	--group-by algo.lagrangian_lr --group-by algo.lagrangian_warmup_frames \
-	--group-by algo.update_per_step
-
+# Rebuild the reference's reports in docs/ from the small result files kept in results/
+# (config.json, metrics.csv, final_eval.json per run; docs/results.md): Table 1 under the
+# recommended preset (results/safe_sound: the evidence's seven tasks, results/table1: the nine of
+# sweep=table1, one report with the aggregate over all sixteen; docs/update_table1.py rewrites
+# docs/results.md's tables from the same runs) and the paper-settings reproduction.
 report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/s3rl-report lagrangian results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
-	$(BIN)/s3rl-report results/safe --out docs/safe
-	$(BIN)/s3rl-report lagrangian results/safe/*/seed* \
-		--out docs/safe/lagrangian.json --plot docs/safe/lagrangian.png
-	$(BIN)/s3rl-report results/safe_sound --out docs/safe_sound
-	$(BIN)/s3rl-report lagrangian results/safe_sound/*/seed* \
-		--out docs/safe_sound/lagrangian.json --plot docs/safe_sound/lagrangian.png
-	$(BIN)/s3rl-report results/safe_sound_hopper_max --out docs/safe_sound_hopper_max
-	$(BIN)/s3rl-report lagrangian results/safe_sound_hopper_max/*/seed* \
-		--out docs/safe_sound_hopper_max/lagrangian.json \
-		--plot docs/safe_sound_hopper_max/lagrangian.png
-	$(BIN)/s3rl-report results/safe_300k --out docs/safe_300k \
-		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
-	$(BIN)/s3rl-report lagrangian results/safe_300k/*/seed* \
-		--out docs/safe_300k/lagrangian.json --plot docs/safe_300k/lagrangian.png
-	$(BIN)/s3rl-report results/table2 --no-embeddings --out docs/table2 \
-		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
-	$(BIN)/s3rl-report benchmarks/results/critic_selection --no-embeddings --no-aggregate \
-		--reference sac_lag --out docs/critic_selection $(SELECTION_GROUPS)
-	$(BIN)/s3rl-report lagrangian benchmarks/results/critic_selection/*/*/seed* \
-		--out docs/critic_selection/lagrangian.json --plot docs/critic_selection/lagrangian.png
-	$(BIN)/s3rl-report benchmarks/results/critic_selection_1m --no-embeddings --no-aggregate \
-		--reference sac_lag --out docs/critic_selection_1m \
-		--group-by algo.cost_critic_read --group-by algo.actor_lr
-	$(BIN)/s3rl-report lagrangian benchmarks/results/critic_selection_1m/*/*/seed* \
-		--out docs/critic_selection_1m/lagrangian.json --plot docs/critic_selection_1m/lagrangian.png
-# Table 1 under one preset: the evidence tasks (results/safe_sound) and the nine others
-# (results/table1, sweep=table1), one report with the aggregate over all of them. Built once
-# the first table1 run is exported; until then docs/safe_sound is the same report. The tables
-# of docs/results.md's "Table 1 in full" are rewritten from the same runs.
-ifneq ($(wildcard results/table1),)
 	$(BIN)/s3rl-report results/safe_sound results/table1 --no-embeddings --out docs/table1
 	$(BIN)/python docs/update_table1.py
 	$(BIN)/s3rl-report lagrangian results/table1/*/seed* \
 		--out docs/table1/lagrangian.json --plot docs/table1/lagrangian.png
-endif
+
+# S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
+GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
+BINARY = s3rl (algo.contrastive_cfg.label=binary)
+# What the critic selection's runs differ in besides the task (research/configs/sweep/critic_*.yaml).
+SELECTION_GROUPS = --group-by algo.cost_critic_read --group-by algo.cost_nonnegative \
+	--group-by algo.lagrangian_lr --group-by algo.lagrangian_warmup_frames \
+	--group-by algo.update_per_step
+R := research/results
+REP := research/reports
+
+# Rebuild the research wing's reports (research/README.md) from its result trees: the seven-task
+# evidence under the sound critics (results/safe_sound), the experiment=safe evidence with FSRL's
+# critics (research/results/safe), Hopper's first sound-critic runs under the max read
+# (safe_sound_hopper_max), the 300k-frame runs (SafetyPointGoal1, graded labels), Table 2 at 100k
+# frames, the critic selection's rounds, and the Table 1 notes' tables.
+research-report: $(STAMP)
+	$(BIN)/s3rl-report results/safe_sound --out $(REP)/safe_sound
+	$(BIN)/s3rl-report lagrangian results/safe_sound/*/seed* \
+		--out $(REP)/safe_sound/lagrangian.json --plot $(REP)/safe_sound/lagrangian.png
+	$(BIN)/s3rl-report $(R)/safe --out $(REP)/safe
+	$(BIN)/s3rl-report lagrangian $(R)/safe/*/seed* \
+		--out $(REP)/safe/lagrangian.json --plot $(REP)/safe/lagrangian.png
+	$(BIN)/s3rl-report $(R)/safe_sound_hopper_max --out $(REP)/safe_sound_hopper_max
+	$(BIN)/s3rl-report lagrangian $(R)/safe_sound_hopper_max/*/seed* \
+		--out $(REP)/safe_sound_hopper_max/lagrangian.json \
+		--plot $(REP)/safe_sound_hopper_max/lagrangian.png
+	$(BIN)/s3rl-report $(R)/safe_300k --out $(REP)/safe_300k \
+		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
+	$(BIN)/s3rl-report lagrangian $(R)/safe_300k/*/seed* \
+		--out $(REP)/safe_300k/lagrangian.json --plot $(REP)/safe_300k/lagrangian.png
+	$(BIN)/s3rl-report $(R)/table2 --no-embeddings --out $(REP)/table2 \
+		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
+	$(BIN)/s3rl-report $(R)/critic_selection --no-embeddings --no-aggregate \
+		--reference sac_lag --out $(REP)/critic_selection $(SELECTION_GROUPS)
+	$(BIN)/s3rl-report lagrangian $(R)/critic_selection/*/*/seed* \
+		--out $(REP)/critic_selection/lagrangian.json --plot $(REP)/critic_selection/lagrangian.png
+	$(BIN)/s3rl-report $(R)/critic_selection_1m --no-embeddings --no-aggregate \
+		--reference sac_lag --out $(REP)/critic_selection_1m \
+		--group-by algo.cost_critic_read --group-by algo.actor_lr
+	$(BIN)/s3rl-report lagrangian $(R)/critic_selection_1m/*/*/seed* \
+		--out $(REP)/critic_selection_1m/lagrangian.json \
+		--plot $(REP)/critic_selection_1m/lagrangian.png
+	$(BIN)/python docs/update_table1.py --research
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache

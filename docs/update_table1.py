@@ -1,21 +1,29 @@
-"""Rewrite the tables of docs/results.md's "Table 1 in full" from the committed runs.
+"""Rewrite the Table 1 tables of docs/results.md (and of the research notes that read the same
+runs) from the committed runs.
 
-    python docs/update_table1.py        # (make report runs it)
+    python docs/update_table1.py               # docs/results.md (make report runs it)
+    python docs/update_table1.py --research    # the research notes (make research-report)
 
-The section's status line (how many tasks are complete, how many of `sweep=table1`'s runs are
-exported), the rows of Table 1 in full (the paper's reward / cost beside ours, last policy and
-best-feasible checkpoint, mean over seeds), each seed's last policy, the paired tests of the
-complete tasks (scipy's `ttest_rel` over seeds, S3RL minus SAC-Lag), rliable's aggregate over
-the complete tasks, its probabilities of improvement task by task, each probability without the
-task that lowers it most and the one that raises it most, and the counts of its cost profiles
-are recomputed from the runs exported to results/safe_sound and results/table1 and from the
-paper's file, and the two tables of the contrastive-phase probe from results/phase_probe. The prose
-around them is left as written (it says what the numbers mean, so reread it after a change).
-tests/docs/test_results_tables.py checks the doc against the same files on its own.
+docs/results.md: the rows of Table 1 (the paper's reward / cost beside ours, last policy and
+best-feasible checkpoint, mean over seeds), rliable's aggregate over the complete tasks, each of
+its probabilities without the task that lowers it most and the one that raises it most, and the
+counts of its cost profiles, recomputed from the runs exported to results/safe_sound and
+results/table1 and from the paper's file.
+
+The research notes (research/2026-11-28-table1-readings.md,
+research/2026-11-28-contrastive-phase-probe.md): the same tables and the status line, each seed's
+last policy, the paired tests of the complete tasks (scipy's `ttest_rel` over seeds, S3RL minus
+SAC-Lag), the probabilities of improvement task by task, and the two tables of the
+contrastive-phase probe from research/results/phase_probe.
+
+The prose around the tables is left as written (it says what the numbers mean, so reread it after
+a change). tests/docs/test_results_tables.py and tests/research/test_research_tables.py check the
+pages against the same files on their own.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import math
@@ -35,9 +43,10 @@ from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
+READINGS = ROOT / "research" / "2026-11-28-table1-readings.md"
+PROBE_NOTE = ROOT / "research" / "2026-11-28-contrastive-phase-probe.md"
 RESULTS = ROOT / "results"
 ROOTS = ("safe_sound", "table1")
-SECTION = "## Table 1 in full: sixteen tasks under `experiment=safe`"
 TABLE_HEADER = "| task | algo | seeds | paper: reward / cost |"
 PAIRED_HEADER = "| task | policy | reward (p) | cost (p) |"
 PER_SEED_HEADER = "| task | algo | seed 10: reward / cost |"
@@ -50,7 +59,7 @@ PROFILE_HEADER = "| policy | algo | cost / limit: 0 |"
 PROFILE_THRESHOLDS = (0.0, 0.2, 0.5, 1.0, 2.0)
 # The probe of where in its interval a contrastive phase falls (results/phase_probe): one run
 # continued past 1M with a longer interval, and finished runs continued 1000 gradient steps.
-PROBE = RESULTS / "phase_probe"
+PROBE = ROOT / "research" / "results" / "phase_probe"
 PHASE_OFFSET_HEADER = "| frames | gradient steps since the last phase |"
 PHASE_PROBE_HEADER = "| task | algo | seed | at 1M: reward / cost |"
 STATUS = "**Where it stands: "
@@ -244,21 +253,8 @@ def table_body(lines: list[str], header: str) -> tuple[int, int]:
     return start, end
 
 
-def replace_table(text: str, header: str, rows: list[str]) -> str:
-    """`text` with the rows of the table whose header starts with `header` replaced."""
-    lines = text.splitlines()
-    start, end = table_body(lines, header)
-    return "\n".join(lines[:start] + rows + lines[end:]) + "\n"
-
-
-def main() -> None:
-    text = DOC.read_text()
-    before, section = text.split(SECTION, 1)
-    section, *after = section.split("\n## ", 1)
-    # The rows keep the doc's task names and order (the paper's), read off the table itself.
-    lines = section.splitlines()
-    start, end = table_body(lines, TABLE_HEADER)
-    tasks = list(dict.fromkeys(line.split("|")[1].strip() for line in lines[start:end]))
+def table_rows(tasks: list[str]) -> dict[str, list[str]]:
+    """Every table this script writes, by its header, for Table 1's tasks in `tasks`' order."""
     runs = exported_runs()
     # One grouping of both trees: group_runs refuses a seed exported to both.
     groups = group_runs([run for found in runs.values() for run in found])
@@ -266,46 +262,69 @@ def main() -> None:
     for task in tasks:
         for algo in ALGOS.values():
             finals.setdefault((task, algo), {})
-    table = [
-        f"| {task} | {name} | {len(finals[task, algo])} | {paper(task, algo)} "
-        f"| {ours(finals[task, algo], 'last')} | {ours(finals[task, algo], 'best-feasible')} |"
-        for task in tasks
-        for name, algo in ALGOS.items()
-    ]
     complete = [
         task
         for task in tasks
         if all(sorted(finals[task, algo]) == list(SEEDS) for algo in ALGOS.values())
     ]
-    section = "\n".join(
-        status(tasks, complete, runs) if line.startswith(STATUS) else line
-        for line in section.split("\n")
-    )
-    section = replace_table(section, TABLE_HEADER, table)
-    paired_rows = [
-        f"| {task} | {policy} | {paired(finals[task, 's3rl'], finals[task, 'sac_lag'], policy)} |"
-        for task in complete
-        for policy in POLICIES
-    ]
-    section = replace_table(section, PAIRED_HEADER, paired_rows)
-    seed_rows = [
-        f"| {task} | {name} | {per_seed(finals[task, algo])} |"
-        for task in tasks
-        for name, algo in ALGOS.items()
-        if any(finals[task, a] for a in ALGOS.values())
-    ]
-    section = replace_table(section, PER_SEED_HEADER, seed_rows)
     complete_groups = [g for g in groups if g.task in set(complete)]
     result = aggregate(complete_groups, "s3rl")
-    section = replace_table(section, ANSWER_HEADER, answer(result))
-    section = replace_table(section, PER_TASK_HEADER, per_task(result))
-    section = replace_table(section, WITHOUT_ONE_TASK_HEADER,
-                            without_one_task(result, complete_groups))
-    section = replace_table(section, PROFILE_HEADER, profile_counts(result))
-    section = replace_table(section, PHASE_OFFSET_HEADER, phase_offset_rows())
-    section = replace_table(section, PHASE_PROBE_HEADER, phase_probe_rows(tasks, finals))
-    DOC.write_text(before + SECTION + "\n## ".join([section, *after]))
-    print(f"{DOC}: {len(table)} rows, {len(complete)} complete tasks")
+    return {
+        STATUS: [status(tasks, complete, runs)],
+        TABLE_HEADER: [
+            f"| {task} | {name} | {len(finals[task, algo])} | {paper(task, algo)} "
+            f"| {ours(finals[task, algo], 'last')} | {ours(finals[task, algo], 'best-feasible')} |"
+            for task in tasks
+            for name, algo in ALGOS.items()
+        ],
+        PAIRED_HEADER: [
+            f"| {task} | {policy} | {paired(finals[task, 's3rl'], finals[task, 'sac_lag'], policy)} |"
+            for task in complete
+            for policy in POLICIES
+        ],
+        PER_SEED_HEADER: [
+            f"| {task} | {name} | {per_seed(finals[task, algo])} |"
+            for task in tasks
+            for name, algo in ALGOS.items()
+            if any(finals[task, a] for a in ALGOS.values())
+        ],
+        ANSWER_HEADER: answer(result),
+        PER_TASK_HEADER: per_task(result),
+        WITHOUT_ONE_TASK_HEADER: without_one_task(result, complete_groups),
+        PROFILE_HEADER: profile_counts(result),
+        PHASE_OFFSET_HEADER: phase_offset_rows(),
+        PHASE_PROBE_HEADER: phase_probe_rows(tasks, finals),
+    }
+
+
+def rewrite(text: str, tables: dict[str, list[str]]) -> str:
+    """`text` with every table whose header it has (and its status line) rewritten."""
+    lines = text.split("\n")
+    for header, rows in tables.items():
+        if header == STATUS:
+            lines = [rows[0] if line.startswith(STATUS) else line for line in lines]
+        elif any(line.startswith(header) for line in lines):
+            start, end = table_body(lines, header)
+            lines = lines[:start] + rows + lines[end:]
+    return "\n".join(lines)
+
+
+def document_tasks(doc: Path) -> list[str]:
+    """Table 1's tasks in the order of the page's own table (the paper's)."""
+    lines = doc.read_text().splitlines()
+    start, end = table_body(lines, TABLE_HEADER)
+    return list(dict.fromkeys(line.split("|")[1].strip() for line in lines[start:end]))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--research", action="store_true",
+                        help="rewrite the research notes' tables instead of docs/results.md's")
+    args = parser.parse_args(argv)
+    tables = table_rows(document_tasks(DOC))
+    for doc in (READINGS, PROBE_NOTE) if args.research else (DOC,):
+        doc.write_text(rewrite(doc.read_text(), tables))
+        print(f"{doc.relative_to(ROOT)}: tables rewritten")
 
 
 if __name__ == "__main__":

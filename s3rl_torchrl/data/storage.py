@@ -4,7 +4,7 @@ A gradient step's batch is 256 rows drawn at random from up to 100 000 stored tr
 ``LazyTensorStorage.get`` indexes the stored TensorDict with the index tensor (advanced
 indexing of each stored tensor, after slicing the filled part when the buffer is not full);
 :class:`GatherStorage` gathers each stored tensor with ``torch.index_select`` instead, which
-gives the same rows in less time (``benchmarks/studies/sample_gather.py``). Everything else (writing,
+gives the same rows in less time (``research/studies/sample_gather.py``). Everything else (writing,
 ``state_dict``, checkpoints, samplers) is torchrl's.
 """
 

@@ -59,7 +59,7 @@ GOAL_COST_LIMIT = 10.0
 # The limit OmniSafe benchmarks the Goal tasks at (its off-policy and on-policy tables, 25 per
 # 1000-step episode); experiment=safe trains at it (TaskSpec.safe_cost_limit).
 GOAL_BENCHMARK_COST_LIMIT = 25.0
-# experiment=safe on the Goal task (docs/results.md, "Safe agents beyond the velocity tasks";
+# experiment=safe on the Goal task (research/2026-11-25-critic-selection.md;
 # chosen on seeds 1 and 2): lambda frozen for the first 100k frames, so that the goal is learned
 # (unconstrained SAC learns it in ~40k frames), then Adam at OmniSafe's per-frame rate on this
 # task (5e-7 per env step at one update per step = 3e-6 per update at 0.2 updates per frame).

@@ -11,12 +11,12 @@ is not needed otherwise, e.g. when a critic is evaluated with detached parameter
 loss. On these machines' CPUs (torch 2.13), inductor writes and reads bool tensors one lane at
 a time through a generic vector. Storing the mask of one ``[4, 256, 128]`` critic activation
 then costs ~18x its eager time, and the forward and input-gradient backward of a 3-layer critic
-ensemble ~3.8x (``benchmarks/studies/relu_mask.py``, ``docs/objectives.md``).
+ensemble ~3.8x (``research/studies/relu_mask.py``, ``docs/objectives.md``).
 
 An earlier version was an ``autograd.Function`` whose backward read the float output. Under
 ``torch.vmap`` (several seeds in one compiled step: ``StackedSACLag``) inductor traced through
 it to ``clamp_min``'s own backward and stored bool masks again. Plain differentiable ops leave
-it nothing to trace through (``benchmarks/studies/relu_mask.py``, the ``critic_backward vmap`` rows).
+it nothing to trace through (``research/studies/relu_mask.py``, the ``critic_backward vmap`` rows).
 ``x = -inf`` gives ``nan`` instead of 0: a network whose pre-activations are infinite has
 diverged anyway.
 """

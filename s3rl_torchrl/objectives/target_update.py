@@ -16,7 +16,7 @@ class ForeachSoftUpdate(SoftUpdate):
     same construction (``ForeachSoftUpdate(loss, tau=0.05)``), ``init_``, ``state_dict`` and
     ``load_state_dict``. ``SoftUpdate.step`` walks the parameter tensordicts and lerps them one
     by one; with the four critics of :class:`~s3rl_torchrl.objectives.SACLagLoss` that measured
-    several times the cost of this class (``benchmarks/studies/target_update.py``).
+    several times the cost of this class (``research/studies/target_update.py``).
 
     The leaves are listed once, by :meth:`init_`, from ``SoftUpdate``'s own source and target
     tensordicts (which it also keeps from ``init_`` on), so both classes update the same tensors.

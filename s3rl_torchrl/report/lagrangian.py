@@ -29,7 +29,7 @@ its lambda updates up to there, no final evaluation): a 1M-frame run then counts
 
 ``make report`` runs it on the runs kept in ``results/`` (docs/results.md); the study that
 launches the runs of a controller comparison and the synthetic plant are
-``benchmarks/studies/lagrangian_dynamics.py``.
+``research/studies/lagrangian_dynamics.py``.
 """
 
 from __future__ import annotations
@@ -208,7 +208,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
     frames = [_float(r["frames"]) for r in rows]
     half = frames[-1] / 2
     late = [r for r, f in zip(rows, frames) if f > half]
-    # The targets' window (docs/results.md, "Holding the limit"): the last 20% of epochs.
+    # The targets' window (research/2026-11-24-lambda-cadence.md): the last 20% of epochs.
     last20 = rows[-max(1, round(0.2 * len(rows))):]
     col = {key: [_float(r.get(key)) for r in late] for key in rows[0]}
 
@@ -269,7 +269,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
         "eval_cost_last20": _mean([_float(r.get("eval/cost")) for r in last20]),
         "train_cost_last20": _mean([_float(r.get("train/cost")) for r in last20]),
         # Over the whole run, not its second half: how high the multiplier went, when, and
-        # where it ended (docs/results.md's per-task tables).
+        # where it ended (the per-task tables of research/2026-11-26-sound-critics-evidence.md).
         "lambda_peak": lambda_peak,
         "lambda_peak_frames": int(peak_frames),
         "lambda_end": _float(rows[-1].get("lagrangian")),

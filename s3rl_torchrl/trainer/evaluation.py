@@ -197,7 +197,7 @@ def constraint_verdict(cost: float, limit: float, frames: int) -> str:
     if frames < PAPER_FRAMES:
         return (
             f"{verdict}. A run this short has not converged: the paper trains "
-            f"{PAPER_FRAMES // 1000}k frames (docs/results.md, \"Holding the limit\")."
+            f"{PAPER_FRAMES // 1000}k frames (docs/results.md, \"What differs from the paper\")."
         )
     return f"{verdict}: this policy does not keep the constraint."
 

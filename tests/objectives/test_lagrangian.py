@@ -240,7 +240,7 @@ def test_damping_removes_the_cycle_on_a_noisy_plant(seed):
 def test_a_stronger_integral_closes_the_offset_the_damped_pid_leaves():
     """A flatter plant (k = 100, lambda* = 8.9), no noise, 50 updates (1M frames at one update
     per 20 000-frame collect): with FSRL's ki the damped PID is nearly a P controller and the
-    cost stays far over the limit; with ki = 0.01 (benchmarks/studies/lagrangian_dynamics.py
+    cost stays far over the limit; with ki = 0.01 (research/studies/lagrangian_dynamics.py
     pid_ema_ki0.01) it overshoots once, then settles at lambda* with the cost just over d."""
     plant = {"J0": 900.0, "k": 100.0}
     lam_star = (plant["J0"] - LIMIT) / plant["k"]

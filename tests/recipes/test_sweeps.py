@@ -1,11 +1,14 @@
-"""The committed multiruns (configs/sweep/*.yaml): every job they launch is a valid config, and no
-two jobs, of one sweep or of two, share a run directory (a 1M-frame run is ~30 minutes; a bad
-override or a shared directory should fail here, not after the first jobs have trained)."""
+"""The committed multiruns (configs/sweep/*.yaml, shipped with the package, and the research
+wing's research/configs/sweep/*.yaml, launched with `hydra.searchpath=[file://research/configs]`):
+every job they launch is a valid config, and no two jobs, of one sweep or of two, share a run
+directory (a 1M-frame run is ~30 minutes; a bad override or a shared directory should fail here,
+not after the first jobs have trained)."""
 
 from __future__ import annotations
 
 import functools
 import itertools
+from pathlib import Path
 
 import pytest
 import yaml
@@ -16,12 +19,26 @@ from s3rl_torchrl.recipes import config_dir
 from s3rl_torchrl.trainer import validate
 from tests.conftest import compose_train
 
-SWEEPS = sorted(p.stem for p in (config_dir() / "sweep").glob("*.yaml"))
+ROOT = Path(__file__).resolve().parents[2]
+# The research wing's sweeps (the critic selection's rounds, the evidence) are not in the
+# package's configs/: Hydra finds them once research/configs is on its search path.
+RESEARCH_CONFIGS = ROOT / "research" / "configs"
+SEARCHPATH = f"hydra.searchpath=[file://{RESEARCH_CONFIGS}]"
+SWEEP_FILES = {
+    p.stem: p
+    for directory in (config_dir() / "sweep", RESEARCH_CONFIGS / "sweep")
+    for p in directory.glob("*.yaml")
+}
+SWEEPS = sorted(SWEEP_FILES)
+
+
+def is_research(name: str) -> bool:
+    return SWEEP_FILES[name].is_relative_to(RESEARCH_CONFIGS)
 
 
 def sweep_jobs(name: str) -> list[list[str]]:
     """Each job's overrides, expanded the way Hydra's basic sweeper expands ``params``."""
-    params = yaml.safe_load((config_dir() / "sweep" / f"{name}.yaml").read_text())
+    params = yaml.safe_load(SWEEP_FILES[name].read_text())
     params = params["hydra"]["sweeper"]["params"]
     parser = OverridesParser.create()
     choices = []
@@ -31,12 +48,26 @@ def sweep_jobs(name: str) -> list[list[str]]:
             choices.append([f"{key}={v}" for v in override.sweep_string_iterator()])
         else:
             choices.append([f"{key}={override.get_value_element_as_str()}"])
-    return [[f"+sweep={name}", *job] for job in itertools.product(*choices)]
+    first = [SEARCHPATH] if is_research(name) else []
+    return [[*first, f"+sweep={name}", *job] for job in itertools.product(*choices)]
 
 
 def test_the_committed_sweeps_are_found():
     # An empty glob would parametrise nothing and pass silently.
     assert {"evidence", "table1", "critic_selection_goal4", "critic_selection_goal5"} <= set(SWEEPS)
+    # The package ships the recommended preset's Table 1 sweep, not the research rounds.
+    assert {p.stem for p in (config_dir() / "sweep").glob("*.yaml")} == {"table1"}
+    assert all(is_research(name) for name in SWEEPS if name != "table1")
+
+
+def test_a_research_sweep_needs_the_research_search_path():
+    # Without research/configs on the search path the package's configs do not know it ...
+    with pytest.raises(Exception, match="critic_selection"):
+        compose_train("+sweep=critic_selection")
+    # ... with it (as research/README.md launches it), it composes.
+    cfg = compose_train(SEARCHPATH, "+sweep=critic_selection", return_hydra_config=True)
+    assert cfg.hydra.sweep.dir == "runs/critic_selection"
+    assert cfg.hydra.sweeper.params["critic"] == "sound"
 
 
 @functools.cache
