@@ -66,6 +66,23 @@ report: $(STAMP)
 	$(BIN)/python docs/update_table1.py
 	$(BIN)/s3rl-report lagrangian results/table1/*/seed* \
 		--out docs/table1/lagrangian.json --plot docs/table1/lagrangian.png
+# Table 1 under the delivered-policy preset (issue 60's evidence, results/table1_v2), and each of
+# its runs beside the same task, algo and seed of results/safe_sound + results/table1, for the
+# last policy and the delivered pick. Built once the first run is exported.
+ifneq ($(wildcard results/table1_v2),)
+	$(BIN)/s3rl-report results/table1_v2 --no-embeddings --out docs/table1_v2
+	for protocol in last delivered; do \
+		$(BIN)/s3rl-report before-after --before results/safe_sound results/table1 \
+			--after results/table1_v2 --protocol $$protocol $(V2_TARGETS) \
+			--out docs/table1_v2/before_after_$$protocol.md \
+			--json docs/table1_v2/before_after_$$protocol.json || exit 1; \
+	done
+endif
+
+# What the delivered-policy preset has to reach (issue 60): 46 of 48 runs within the limit per
+# algo, SafetyPointGoal1 at a mean reward >= 20 for a mean cost <= 25, 85% of the reward kept.
+V2_TARGETS = --within s3rl=46 --within sac_lag=46 --task-target SafetyPointGoal1-v0=20,25 \
+	--reward-kept 0.85
 
 # S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
 GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
@@ -110,6 +127,8 @@ research-report: $(STAMP)
 		--out $(REP)/critic_selection_1m/lagrangian.json \
 		--plot $(REP)/critic_selection_1m/lagrangian.png
 	$(BIN)/python docs/update_table1.py --research
+	$(BIN)/python research/delivered_policy/summarise.py $(R)/delivered_selection \
+		--out research/delivered_policy/selection.md
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache
