@@ -1,0 +1,50 @@
+"""research/delivered_policy/selection.md is what summarise.py reads from the exported selection
+runs (research/results/delivered_selection), recomputed here from their files by hand."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "research" / "results" / "delivered_selection"
+
+
+def _summarise():
+    path = ROOT / "research" / "delivered_policy" / "summarise.py"
+    spec = importlib.util.spec_from_file_location("summarise", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_committed_table_is_the_exported_runs_table():
+    module = _summarise()
+    committed = (ROOT / "research" / "delivered_policy" / "selection.md").read_text()
+    lines = ["| " + " | ".join(module.HEADER) + " |", "|" + "---|" * len(module.HEADER)]
+    lines += ["| " + " | ".join(row) + " |" for row in module.rows(RESULTS)]
+    assert committed == "\n".join(lines) + "\n"
+
+
+def test_each_row_by_hand():
+    rows = {(r[0], r[1], r[2], r[3]): r for r in _summarise().rows(RESULTS)}
+    for final_path in sorted(RESULTS.rglob("final_eval.json")):
+        run = final_path.parent
+        config = json.loads((run / "config.json").read_text())
+        final = json.loads(final_path.read_text())
+        key = (run.relative_to(RESULTS).parts[0], config["algo"]["name"],
+               config["task"]["name"], str(config["seed"]))
+        row = rows[key]
+        assert row[5] == f"{final['reward_mean']:.1f} / {final['cost_mean']:.1f}"
+        picked = final["delivered"]
+        assert row[6].startswith(f"{picked['reward_mean']:.1f} / {picked['cost_mean']:.1f}")
+        with (run / "metrics.csv").open() as f:
+            metrics = [r for r in csv.DictReader(f)
+                       if float(r["frames"]) > 0.8 * config["collector"]["total_frames"]]
+        limit = config["task"]["cost_limit"]
+        train = [float(r["train/cost"]) for r in metrics]
+        over = [float(r["eval/cost"]) > limit for r in metrics]
+        assert row[7] == f"{sum(train) / len(train):.1f}"
+        assert row[8] == f"{sum(over) / len(over):.2f}"
