@@ -29,7 +29,7 @@ fresh shallow copy of one batch that carries every entry of a real replay-buffer
 recipe (``make_batch``). ``compile`` wraps the loss module (joint) or its two halves (fsrl) with
 the trainer's ``compile_loss`` (``torch.compile``, default mode, isolated recompiles). Compile
 time: each variant alone in a fresh process with inductor's on-disk caches off, wall time of the
-first three steps minus three steady steps. Results: ``docs/objectives.md``.
+first three steps minus three steady steps. Results: ``research/2026-11-21-benchmark-studies.md``.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@
         [--agents 5] [--compiled] [--out research/results/critic_eval_stacked.json]
 
 It measures the version of the code that still had ``critic_eval`` (up to commit 8e0ee0c;
-issue 37 kept ``"vmap"`` alone, docs/objectives.md "How it is shaped"). That version's
+issue 37 kept ``"vmap"`` alone, research/2026-11-21-benchmark-studies.md, "The critic evaluations removed in issue 37"). That version's
 ``StackedSACLag`` ran ``"vmap"`` only after its template loss gave each critic tensordict its
 batch size back inside the ``vmap`` over agents (what the later version does); the script
 patches that in (``_before_issue37.py``). HalfCheetah sizes (17/6), 128x128 networks, batch 256, one cost, lambda 0.3;

@@ -14,7 +14,7 @@ Two measurements, one thread, microseconds per call, median over interleaved rou
 - ``critic_backward vmap``: the same for ``--seeds`` agents under ``torch.vmap`` (what
   ``StackedSACLag`` compiles for several seeds in one process).
 
-Results: ``docs/objectives.md`` (compile notes).
+Results: ``research/2026-11-21-benchmark-studies.md`` ("The package's ReLU under torch.compile").
 """
 
 from __future__ import annotations
