@@ -17,7 +17,7 @@ STAMP := $(VENV)/.installed-$(EXTRAS)
 # pytest-xdist workers for make test / test-fast (0: one process).
 WORKERS ?= 2
 
-.PHONY: setup train test test-fast lint bench report clean
+.PHONY: setup train test test-fast lint bench report clips clean
 
 $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -52,6 +52,11 @@ test-fast: $(STAMP) lint
 # benchmarks/results/standing/<date>.json. A subset or a smoke run: make bench ARGS="sampler --quick"
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py $(ARGS)
+
+# The clips of docs/media/ (docs/video.md): one GIF per task family, unsafe steps marked, of a
+# short S3RL run it trains per task (minutes), or of given runs: make clips ARGS="--run TASK=DIR"
+clips: $(STAMP)
+	$(BIN)/python docs/make_clips.py $(ARGS)
 
 # S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
 GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)
