@@ -52,10 +52,16 @@ def make_video_env(task: str, seed: int | None = None, size: int = VIDEO_SIZE) -
     )
     if family != "bullet":
         for gym_env in _gym_envs(env):
-            # Read when the renderer's context is made, at the first render (after reset).
             quality = gym_env.unwrapped.model.vis.quality
             quality.shadowsize = MUJOCO_SHADOW_SIZE
             quality.offsamples = MUJOCO_OFFSCREEN_SAMPLES
+            # MuJoCo reads them when a renderer's context is made, and torchrl rendered a
+            # first frame already (to size "pixels"): drop Gymnasium's viewer, so that the
+            # next frame makes a new context with them.
+            renderer = gym_env.unwrapped.mujoco_renderer
+            renderer.close()
+            renderer._viewers.clear()
+            renderer.viewer = None
     env.append_transform(CostOverlay())
     return env
 
