@@ -17,7 +17,7 @@ STAMP := $(VENV)/.installed-$(EXTRAS)
 # pytest-xdist workers for make test / test-fast (0: one process).
 WORKERS ?= 2
 
-.PHONY: setup train test test-fast lint bench report research-report clean
+.PHONY: setup train test test-fast lint bench report research-report clips clean
 
 $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
@@ -52,6 +52,11 @@ test-fast: $(STAMP) lint
 # benchmarks/results/standing/<date>.json. A subset or a smoke run: make bench ARGS="sampler --quick"
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py $(ARGS)
+
+# The clips of docs/media/ (docs/video.md): one GIF per task family, unsafe steps marked, of a
+# short S3RL run it trains per task (minutes), or of given runs: make clips ARGS="--run TASK=DIR"
+clips: $(STAMP)
+	$(BIN)/python docs/make_clips.py $(ARGS)
 
 # Rebuild the reference's reports in docs/ from the small result files kept in results/
 # (config.json, metrics.csv, final_eval.json per run; docs/results.md): Table 1 under the

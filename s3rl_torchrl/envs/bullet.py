@@ -94,10 +94,42 @@ def import_bullet_safety_gym():
     return sys.modules[BULLET_MODULE]
 
 
-def make_bullet_env(*, upstream_id: str, **kwargs: Any) -> gym.Env:
+class RgbArrayRender(gym.Wrapper):
+    """Gymnasium's ``render()`` (``render_mode="rgb_array"``) on an upstream Bullet env, whose
+    own ``render(mode=...)`` takes the old Gym argument (and opens PyBullet's GUI without one).
+    Frames come from PyBullet's CPU renderer (TinyRenderer: no OpenGL, no display), from the
+    task's own camera (the Run tasks' follows the agent), ``width`` x ``height`` pixels."""
+
+    def __init__(self, env: gym.Env, width: int | None = None, height: int | None = None):
+        super().__init__(env)
+        camera = env.unwrapped.world.camera
+        camera.render_width = width or camera.render_width
+        camera.render_height = height or camera.render_height
+        self._render_mode = "rgb_array"
+        # The simulated rate (upstream declares none; Gymnasium's checker warns without it).
+        self.metadata = {**env.metadata, "render_fps": round(1 / env.unwrapped.dt)}
+
+    @property
+    def render_mode(self) -> str:
+        return self._render_mode
+
+    def render(self) -> np.ndarray:
+        return np.ascontiguousarray(self.env.unwrapped.render(mode="rgb_array"), dtype=np.uint8)
+
+
+def make_bullet_env(
+    *,
+    upstream_id: str,
+    render_mode: str | None = None,
+    width: int | None = None,
+    height: int | None = None,
+    **kwargs: Any,
+) -> gym.Env:
     """Gymnasium entry point of ``s3rl_torchrl/<upstream_id>``: the upstream env, seedable.
 
     ``kwargs`` override the upstream registration's kwargs (e.g. ``debug=True``).
+    ``render_mode="rgb_array"`` renders frames of ``width`` x ``height`` (upstream: 480 x 360)
+    through :class:`RgbArrayRender`; ``"human"`` is upstream's PyBullet GUI (needs a display).
     """
     import_bullet_safety_gym()
     upstream = gym.spec(upstream_id)
@@ -105,7 +137,16 @@ def make_bullet_env(*, upstream_id: str, **kwargs: Any) -> gym.Env:
         # Its float32 observation bounds in a float64 Box: NumPy warns casting the dtype limits.
         warnings.filterwarnings("ignore", "overflow encountered in cast", RuntimeWarning)
         env = load_env_creator(upstream.entry_point)(**{**upstream.kwargs, **kwargs})
-    return NumpyGlobalSeeding(env)
+    if render_mode == "human":
+        env.render(mode="human")  # upstream: reconnects PyBullet with its GUI
+    env = NumpyGlobalSeeding(env)
+    if render_mode == "rgb_array":
+        env = RgbArrayRender(env, width, height)
+    return env
+
+
+# Gymnasium reads render modes from the entry point's ``metadata`` before building the env.
+make_bullet_env.metadata = {"render_modes": ["human", "rgb_array"]}
 
 
 def register_bullet_tasks() -> None:

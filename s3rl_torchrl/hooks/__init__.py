@@ -8,10 +8,13 @@ module whose state the checkpoint keeps.
 - ``probes.LinearProbes``: the linear probes of the policy encoder at each epoch's end
   (``probe/*``);
 - ``critics.CriticDiagnostics``: the SAC family's critics against recent returns and the actor's
-  gradient per loss term (``critic/*``, ``grad/*``).
+  gradient per loss term (``critic/*``, ``grad/*``);
+- ``video.EvalVideo``: a video of one evaluation episode, unsafe steps marked, through the
+  run's logger every ``eval.video_interval`` epochs.
 """
 
 from s3rl_torchrl.hooks.base import HOOK_POINTS, HookHost, TrainerHook  # noqa: F401
 from s3rl_torchrl.hooks.critics import CriticDiagnostics  # noqa: F401
 from s3rl_torchrl.hooks.labels import GradedLabels, probed_label  # noqa: F401
 from s3rl_torchrl.hooks.probes import LinearProbes  # noqa: F401
+from s3rl_torchrl.hooks.video import EvalVideo  # noqa: F401

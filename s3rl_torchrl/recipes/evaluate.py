@@ -4,6 +4,10 @@
     s3rl-eval checkpoint=<run dir> episodes=10 max_steps=1000    # given values win
     s3rl-eval checkpoint=<run dir> video=true                    # also writes episode.mp4
 
+The video (one episode, unsafe steps framed in red, running cost and reward on every frame)
+renders on a headless machine as is: the package picks MuJoCo's offscreen backend
+(``s3rl_torchrl/_render_backend.py``); docs/video.md.
+
 ``episodes``, ``num_envs``, ``seed`` and ``max_steps`` default to the run's own evaluation
 settings, read from the checkpoint (``trainer.evaluate_checkpoint.eval_settings``), so the
 numbers measure what the run's final table measured. Prints the settings used, the result
@@ -23,6 +27,7 @@ from hydra.core.config_store import ConfigStore
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import MISSING, DictConfig, OmegaConf
 
+from s3rl_torchrl._render_backend import RenderBackendError
 from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_known_warnings
 from s3rl_torchrl.trainer import (
     CheckpointError,
@@ -105,7 +110,7 @@ def _main(cfg: DictConfig) -> float:
             if command.video:
                 video_path = Path(command.video_path or output.dir / "episode.mp4")
             result = evaluate_policy(actor, train_cfg, settings, video_path)
-        except CheckpointError as err:
+        except (CheckpointError, RenderBackendError) as err:
             reject(err, output)
         except Exception:
             log.exception("s3rl-eval stopped with an error")

@@ -56,6 +56,9 @@ LOGGER_PACKAGES = {
     "mlflow": ("mlflow", "mlflow"),
 }
 DEVICES = ("cpu", "cuda", "mps")
+# The loggers whose log_video writes a video here (eval.video_interval): torchrl's MLflow logger
+# needs torchcodec and a system FFmpeg, `none` logs nothing.
+VIDEO_LOGGERS = ("csv", "tensorboard", "wandb")
 
 
 def _check_cpp_compiler(path: str) -> None:
@@ -155,6 +158,9 @@ class EvalConfig:
     delivery_epochs: int = 0
     delivery_episodes: int = 5
     delivery_cost_share: float = 1.0
+    # Every this many epochs, a video of one deterministic episode (eval.max_steps steps, unsafe
+    # steps marked) through the logger's log_video (hooks/video.py, docs/video.md); 0: none.
+    video_interval: int = 0
 
     def check(self, path: str) -> None:
         check_range(f"{path}.num_envs", self.num_envs, 1)
@@ -167,6 +173,7 @@ class EvalConfig:
         )
         if self.max_steps is not None:
             check_range(f"{path}.max_steps", self.max_steps, 1)
+        check_range(f"{path}.video_interval", self.video_interval, 0)
 
 
 @dataclass
@@ -299,6 +306,19 @@ class TrainConfig:
             )
         self._check_contrastive_label(prefix)
         _check_learns(self.collector, self.algo, prefix)
+        if self.eval.video_interval and self.logger.backend not in VIDEO_LOGGERS:
+            fail(
+                prefix + "eval.video_interval",
+                self.eval.video_interval,
+                f"logs its video through the logger, and logger={self.logger.backend} logs "
+                f"none; choose logger={', '.join(VIDEO_LOGGERS)} (docs/video.md)",
+            )
+        if self.eval.video_interval and self.seeds is not None:
+            fail(
+                prefix + "eval.video_interval",
+                self.eval.video_interval,
+                "is for single-seed runs; record a seed's video with s3rl-eval video=true",
+            )
 
     def _check_contrastive_label(self, prefix: str) -> None:
         path = prefix + "algo.contrastive_cfg.label"

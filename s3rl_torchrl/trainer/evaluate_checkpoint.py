@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from s3rl_torchrl.envs import get_task, make_env
+from s3rl_torchrl.envs.video import make_video_env
 from s3rl_torchrl.trainer.builders import build_agent, build_replay_buffer
 from s3rl_torchrl.trainer.checkpoint import CheckpointError, load_checkpoint
 from s3rl_torchrl.trainer.config import TrainConfig, saved_train_config
@@ -117,9 +118,13 @@ def evaluate_policy(
     finally:
         env.close()
     if video_path is not None:
-        video_env = make_env(cfg.task.name, seed=settings.seed, from_pixels=True, pixels_only=False)
-        record_video(video_env, actor, video_path, settings.max_steps)
-        video_env.close()
+        # A copy of the first test env (its seed), rendering; after the statistics, which it
+        # does not change.
+        video_env = make_video_env(cfg.task.name, seed=settings.seed)
+        try:
+            record_video(video_env, actor, video_path, settings.max_steps)
+        finally:
+            video_env.close()
     return result
 
 

@@ -15,7 +15,7 @@ from typing import Any
 import torch
 from tensordict import TensorDictBase
 from torchrl.envs import EnvBase
-from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 
 @dataclass
@@ -241,23 +241,29 @@ def format_table(
 
 
 def record_video(
-    env: EnvBase, policy, path: str | Path, max_steps: int = 1000, fps: int = 30
+    env: EnvBase, policy, path: str | Path, max_steps: int = 1000, fps: int | None = None
 ) -> Path:
-    """Roll out one deterministic episode on a ``from_pixels`` env and write its frames.
+    """Roll out one deterministic episode (at most ``max_steps`` steps) on a video env and
+    write its frames as they come: the reset frame, then one frame per step.
 
-    ``env`` must emit ``"pixels"`` (``make_env(..., from_pixels=True, pixels_only=False)``,
-    MuJoCo offscreen rendering: on a headless machine set ``MUJOCO_GL=egl`` or ``osmesa``).
-    The format follows the suffix (``.mp4`` needs ``imageio-ffmpeg``; ``.gif`` works as is).
+    ``env`` is :func:`~s3rl_torchrl.envs.video.make_video_env`'s: its ``"pixels"`` carry the
+    unsafe-step border and the running cost and reward (docs/video.md). The format follows
+    the suffix (``.mp4``, ``.gif``; :class:`~s3rl_torchrl.envs.video.VideoWriter`).
     """
-    import imageio.v2 as imageio
+    from s3rl_torchrl.envs.video import VIDEO_FPS, VideoWriter
 
-    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
-        rollout = env.rollout(max_steps, policy)
-    frames = rollout["pixels"].reshape(-1, *rollout["pixels"].shape[-3:]).cpu().numpy()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".gif":
-        imageio.mimsave(path, list(frames), duration=1000 / fps)
-    else:
-        imageio.mimsave(path, list(frames), fps=fps)
+    with (
+        set_exploration_type(ExplorationType.DETERMINISTIC),
+        torch.no_grad(),
+        VideoWriter(path, fps or VIDEO_FPS) as writer,
+    ):
+        tensordict = env.reset()
+        writer.append(tensordict["pixels"].cpu().numpy())
+        for _ in range(max_steps):
+            tensordict = env.step(policy(tensordict))
+            writer.append(tensordict["next", "pixels"].cpu().numpy())
+            if tensordict["next", "done"].any():
+                break
+            tensordict = step_mdp(tensordict)
     return path

@@ -51,6 +51,7 @@ from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, res
 from s3rl_torchrl.hooks import (
     HOOK_POINTS,
     CriticDiagnostics,
+    EvalVideo,
     GradedLabels,
     LinearProbes,
     TrainerHook,
@@ -257,6 +258,8 @@ class Trainer:
             CriticDiagnostics(
                 self.agent.loss, self.replay_buffer, cfg.algo.gamma, cfg.seed
             ).register(self, "critic_diagnostics")
+        if cfg.eval.video_interval:
+            EvalVideo.for_run(cfg).register(self, "video")
         for name, hook in (hooks or {}).items():
             hook.register(self, name)
         if on_epoch_end is not None:

@@ -12,7 +12,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+import torch
 from torchrl.record.loggers import Logger
+from torchrl.record.loggers.csv import CSVLogger
 
 METRICS_FILE = "metrics.csv"
 STEP_COLUMN = "frames"
@@ -26,9 +28,7 @@ def make_torchrl_logger(
     if backend == "none":
         return None
     if backend == "csv":
-        from torchrl.record.loggers.csv import CSVLogger
-
-        return CSVLogger(exp_name=exp_name, log_dir=str(log_dir))
+        return Mp4CSVLogger(exp_name=exp_name, log_dir=str(log_dir))
     if backend == "tensorboard":
         from torchrl.record.loggers.tensorboard import TensorboardLogger
 
@@ -53,6 +53,29 @@ def make_torchrl_logger(
     raise ValueError(
         f"Unknown logger backend {backend!r}; valid are csv, tensorboard, wandb, mlflow, none."
     )
+
+
+class Mp4CSVLogger(CSVLogger):
+    """torchrl's CSV logger whose videos are playable mp4 files,
+    ``logs/<exp>/videos/<tag>_<step>.mp4`` (the training video, ``eval.video_interval``).
+
+    torchrl's own CSV videos are tensor files (``.pt``) by default, and its mp4 writer needs
+    torchcodec and a system FFmpeg; this one writes with imageio-ffmpeg (a dependency, its
+    FFmpeg bundled). Scalars are torchrl's, unchanged."""
+
+    def log_video(self, name: str, video: torch.Tensor, step: int | None = None, **kwargs) -> None:
+        from s3rl_torchrl.envs.video import VideoWriter
+
+        if video.dim() != 5 or video.size(2) not in (1, 3):
+            raise ValueError(f"log_video takes a [N, T, C, H, W] video, got {tuple(video.shape)}.")
+        if step is None:
+            step = self.experiment.videos_counter[name]
+            self.experiment.videos_counter[name] += 1
+        frames = video.reshape(-1, *video.shape[-3:]).expand(-1, 3, -1, -1).permute(0, 2, 3, 1)
+        path = Path(self.experiment.log_dir, "videos", f"{name}_{step}.mp4")
+        with VideoWriter(path, fps=kwargs.get("fps", self.video_fps)) as writer:
+            for frame in frames.to(torch.uint8).cpu().numpy():
+                writer.append(frame)
 
 
 def _trim_csv(path: Path, max_step: int, step_index: int, has_header: bool) -> None:

@@ -70,18 +70,24 @@ def test_train_then_evaluate(tmp_path):
     assert "sac_lag SafetyHalfCheetahVelocity-v1 seed 10" in out.stdout
     assert "episodes=3 (given)" in out.stdout and "max_steps=30 (given)" in out.stdout
 
-    # A video through MuJoCo's offscreen renderer (EGL here; see docs/recipes.md).
-    video = tmp_path / "episode.gif"
-    out = run(
-        "s3rl-eval", f"checkpoint={run_dir}", "episodes=1", "max_steps=8", "video=true",
-        f"video_path={video}", f"hydra.run.dir={tmp_path / 'eval_video'}", cwd=tmp_path,
-        MUJOCO_GL="egl",
+    # A video, as a new user asks for it: no MUJOCO_GL, no display (the package picks EGL,
+    # s3rl_torchrl/_render_backend.py), the default episode.mp4 (imageio-ffmpeg).
+    headless = {k: v for k, v in os.environ.items()
+                if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY", "WAYLAND_DISPLAY")}
+    eval_dir = tmp_path / "eval_video"
+    out = subprocess.run(
+        [str(BIN / "s3rl-eval"), f"checkpoint={run_dir}", "episodes=1", "max_steps=8",
+         "video=true", f"hydra.run.dir={eval_dir}"],
+        cwd=tmp_path, env=headless, capture_output=True, text=True, timeout=600,
     )
     assert out.returncode == 0, out.stderr
+    video = eval_dir / "episode.mp4"
+    assert f"Video: {video}" in out.stdout
     import imageio.v2 as imageio
 
-    frames = imageio.mimread(video)
-    assert len(frames) == 8 and frames[0].ndim == 3 and frames[0].std() > 0
+    frames = imageio.mimread(video, format="FFMPEG")
+    # The reset frame and one per step.
+    assert len(frames) == 9 and frames[0].shape == (256, 256, 3) and frames[0].std() > 0
 
 
 def test_a_compiled_run_prints_no_third_party_noise(tmp_path):
