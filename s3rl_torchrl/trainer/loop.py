@@ -83,7 +83,12 @@ from s3rl_torchrl.trainer.evaluation import (
     evaluate,
     format_table,
 )
-from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
+from s3rl_torchrl.trainer.metrics import (
+    RunMetrics,
+    cut_back_to_checkpoint,
+    ensure_new_run_dir,
+    make_torchrl_logger,
+)
 from s3rl_torchrl.trainer.resume import RESUME_LOCKED, config_changes
 from s3rl_torchrl.trainer.run_lock import RunLock
 
@@ -271,6 +276,11 @@ class Trainer:
         self.inexact_resume: str | None = None
         if checkpoint is not None:
             self._restore(checkpoint, checkpoint_dir)
+            # What the interrupted run logged after its checkpoint goes, before a logger opens
+            # (or, as TensorBoard's does, creates) a file.
+            cut_back_to_checkpoint(
+                self.run_dir, checkpoint.get("appended_files"), self.counters.frames
+            )
             record_resume(
                 self.run_dir,
                 saved,
@@ -287,9 +297,7 @@ class Trainer:
             project=cfg.logger.project,
             wandb_mode=cfg.logger.wandb_mode,
         )
-        self.metrics = RunMetrics(
-            self.run_dir, logger, resume_frames=self.counters.frames if checkpoint else None
-        )
+        self.metrics = RunMetrics(self.run_dir, logger, resume=checkpoint is not None)
         self.history: list[dict[str, Any]] = []
 
     # ----------------------------------------------------------------------------- hooks
@@ -610,6 +618,8 @@ class Trainer:
                 "last_losses": {k: v.detach().clone() for k, v in self._last_losses.items()},
                 "last_contrastive": dict(self._last_contrastive),
             },
+            # The size of every file the run appends to: a resume cuts them back to it.
+            "appended_files": self.metrics.appended_files(),
         }
 
     def _collector_state(self) -> dict[str, Any] | None:
