@@ -227,7 +227,7 @@ class Trainer:
             ensure_new_run_dir(self.run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         # No second process may train into this directory until the loop ends (run_lock.py).
-        self.run_lock = RunLock(self.run_dir)
+        self.run_lock = RunLock.take(self.run_dir)
 
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
