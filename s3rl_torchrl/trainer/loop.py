@@ -125,6 +125,7 @@ class TrainResult:
     counters: Counters
     final_eval: EvalResult | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
+    exit_status: int = 0  # the command's (StopRequest.exit_status when interrupted)
 
 
 class StopRequest:
@@ -132,10 +133,20 @@ class StopRequest:
 
     def __init__(self) -> None:
         self.requested = False
+        self.signum: int | None = None  # the signal that asked for the stop (None: a callback)
         self._previous: dict[int, Any] = {}
 
     def __call__(self, signum=None, frame=None) -> None:
         self.requested = True
+        if signum is not None and self.signum is None:
+            self.signum = int(signum)
+
+    @property
+    def exit_status(self) -> int:
+        """The status a command stopped this way exits with: the shell's 128 + the signal's
+        number (130 for Ctrl-C, 143 for SIGTERM), so that ``s3rl-train ... && next`` does not
+        go on with an unfinished run; 1 for a stop without a signal."""
+        return 128 + self.signum if self.signum is not None else 1
 
     def install(self) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -275,6 +286,10 @@ class Trainer:
         # Why a resume cannot continue the interrupted run exactly (None: it can, or new run).
         self.inexact_resume: str | None = None
         if checkpoint is not None:
+            print(
+                f"Resuming {self.run_dir} at frame {checkpoint['counters']['frames']} of "
+                f"{cfg.collector.total_frames}"
+            )
             self._restore(checkpoint, checkpoint_dir)
             # What the interrupted run logged after its checkpoint goes, before a logger opens
             # (or, as TensorBoard's does, creates) a file.
@@ -590,7 +605,9 @@ class Trainer:
             f"Interrupted: checkpoint written to {self.run_dir / 'checkpoints' / 'latest'}; "
             f"continue with resume={self.run_dir}"
         )
-        return TrainResult(self.run_dir, "interrupted", self.counters, None, self.history)
+        return TrainResult(
+            self.run_dir, "interrupted", self.counters, None, self.history, self.stop.exit_status
+        )
 
     # ----------------------------------------------------------------------------- state
     def state_dict(self) -> dict[str, Any]:

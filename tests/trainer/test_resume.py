@@ -229,7 +229,18 @@ def test_resuming_a_finished_run_keeps_its_final_evaluation(tiny_config, tmp_pat
     assert again.status == "finished"
     assert (tmp_path / "final_eval.json").read_text() == saved
     assert again.final_eval.reward_mean == json.loads(saved)["reward_mean"]
-    assert "not recomputed" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "not recomputed" in out
+    assert f"Resuming {tmp_path} at frame 200 of 200\n" in out  # says it resumed, and where
+
+
+def test_an_interrupted_run_exits_with_the_signals_status(tiny_config, tmp_path, monkeypatch):
+    # The shell's convention (128 + the signal's number), so that `s3rl-train ... && next`
+    # stops at an unfinished run; the recipe exits with it (recipes/train.py).
+    cfg = tiny_config("algo=sac", "collector.total_frames=400")
+    sigterm_at_step(Trainer, 10, monkeypatch)
+    result = train(cfg, tmp_path)
+    assert result.status == "interrupted" and result.exit_status == 128 + signal.SIGTERM == 143
 
 
 @pytest.mark.slow
@@ -278,6 +289,30 @@ def test_kill_9_after_a_checkpoint_then_resume_alone_is_the_uninterrupted_run(tm
     assert rows(part) == rows(full)
     assert final(part) == final(full)
     assert_same_files(part, full)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_the_cli_exits_non_zero_after_an_interrupt_and_says_how_to_continue(signum, tmp_path):
+    import subprocess
+    import sys
+    import time
+
+    train_cli = str(Path(sys.executable).with_name("s3rl-train"))
+    run = tmp_path / "run"
+    process = subprocess.Popen(
+        [train_cli, "experiment=tiny", "algo=sac", "collector.total_frames=100000",
+         f"hydra.run.dir={run}"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    deadline = time.monotonic() + 300
+    while process.poll() is None and time.monotonic() < deadline:
+        if (run / "metrics.csv").is_file() and len(read_metrics(run)) >= 1:
+            break
+        time.sleep(0.05)
+    process.send_signal(signum)
+    out, _ = process.communicate(timeout=300)
+    assert process.returncode == 128 + signum  # 143 for SIGTERM, 130 for Ctrl-C
+    assert f"continue with resume={run}" in out
 
 
 @pytest.mark.slow
