@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from hydra.experimental.callback import Callback
-from omegaconf import DictConfig, OmegaConf, open_dict, read_write
+from omegaconf import DictConfig, open_dict, read_write
 
 from s3rl_torchrl.trainer.run_lock import LOCK_FILE, RunInUseError, RunLock
 
@@ -128,14 +128,17 @@ def claim_run_dir(run_dir: Path, config: DictConfig, continues: bool) -> RunLock
     run found there (``resume=auto``), refuse a directory that holds a run or another
     invocation's Hydra files. Nothing is written into a refused directory (not even the lock
     file's process id)."""
-    job_name = OmegaConf.select(config, "hydra.job.name", default=None, throw_on_missing=False)
-    hydra_files = [config.hydra.output_subdir, f"{job_name or 'train'}.log"]
 
     def holds_no_other_run() -> None:
         if continues:
             return
-        names = (*RUN_FILES, *filter(None, hydra_files))
-        found = sorted(name for name in names if (run_dir / name).exists())
+        # A run's files, another command's .hydra/ or job log (train.log: Hydra names it after
+        # the job).
+        names = [*RUN_FILES, *filter(None, [config.hydra.output_subdir])]
+        found = sorted(
+            [name for name in names if (run_dir / name).exists()]
+            + [log.name for log in run_dir.glob("*.log") if log.is_file()]
+        )
         if found:
             raise FileExistsError(
                 f"{run_dir} already holds a run ({', '.join(found)}); continue it with "

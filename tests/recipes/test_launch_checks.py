@@ -6,6 +6,7 @@ written; run directories are unique per command."""
 from __future__ import annotations
 
 import datetime
+import itertools
 import os
 import sys
 from contextlib import contextmanager
@@ -159,7 +160,8 @@ def test_two_commands_in_the_same_second_get_directories_of_their_own(monkeypatc
     # one second shared it (3 of 7 simultaneous launches).
     from hydra.core import utils as hydra_utils
 
-    starts = iter([datetime.datetime(2026, 1, 1, 12, 0, 0, micro) for micro in (1, 2)])
+    # Each command's clock reads one microsecond after the previous one's, in one second.
+    starts = (datetime.datetime(2026, 1, 1, 12, 0, 0, micro) for micro in itertools.count(1))
 
     class Clock(datetime.datetime):
         @classmethod
