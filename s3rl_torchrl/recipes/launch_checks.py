@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import shutil
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -68,12 +69,16 @@ def job_problem(config: DictConfig) -> str | None:
     return None
 
 
-def _check_writable(directory: Path, advice: str) -> None:
+def _check_writable(
+    directory: Path, advice: str, before_refusing: Callable[[], None] | None = None
+) -> None:
     from s3rl_torchrl.trainer.checkpoint import CheckpointError, check_writable
 
     try:
         check_writable(directory)
     except CheckpointError as err:
+        if before_refusing is not None:
+            before_refusing()
         refuse(f"{err} {advice}")
 
 
@@ -99,7 +104,9 @@ class LaunchChecks(Callback):
                 f"({err.strerror or type(err).__name__}): a run writes its checkpoints, metrics "
                 f"and config there; nothing was trained. {WRITABLE_RUN_DIR}"
             )
-        _check_writable(run_dir, WRITABLE_RUN_DIR)
+        # The lock file could be opened; files must be creatable too (a directory made
+        # read-only since its run ended).
+        _check_writable(run_dir, WRITABLE_RUN_DIR, lambda: RunLock.release_claim(run_dir))
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         jobs = sweep_jobs(config)
@@ -111,9 +118,8 @@ class LaunchChecks(Callback):
                     "started:",
                     *(f"  {' '.join(overrides) or '(no overrides)'}: {p}" for overrides, p in bad),
                 )
-        _check_writable(
-            Path(str(config.hydra.sweep.dir)), "Give a directory you can write: hydra.sweep.dir=<dir>."
-        )
+        sweep_dir = Path(str(config.hydra.sweep.dir))
+        _check_writable(sweep_dir, "Give a directory you can write: hydra.sweep.dir=<dir>.")
         launcher = str(config.hydra.launcher.get("_target_", ""))
         if launcher == SLURM_LAUNCHER and shutil.which("sbatch") is None:
             refuse(
