@@ -83,7 +83,9 @@ def appended_files(run_dir: str | Path) -> dict[str, int]:
     relative to the run directory: what a checkpoint records so that a resume can cut the files
     back to it. Call it after the loggers have flushed."""
     run_dir = Path(run_dir)
-    return {path.relative_to(run_dir).as_posix(): path.stat().st_size for path in _appended(run_dir)}
+    return {
+        path.relative_to(run_dir).as_posix(): path.stat().st_size for path in _appended(run_dir)
+    }
 
 
 def _appended(run_dir: Path) -> list[Path]:

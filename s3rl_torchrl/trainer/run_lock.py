@@ -8,9 +8,9 @@ operating system releases it when the process dies, so a run killed with ``kill 
 leaves a stale lock behind.
 
 ``s3rl-train`` takes the lock before Hydra writes its files into the run directory
-(:class:`s3rl_torchrl.recipes.launch_checks.LaunchChecks`); the trainer then continues with the lock its
-process holds (:meth:`RunLock.take`): ``flock`` refuses a second lock of one file even to the
-process that holds the first.
+(:class:`s3rl_torchrl.recipes.launch_checks.LaunchChecks`, :meth:`RunLock.claim`); the trainer
+then continues with that lock (:meth:`RunLock.take`): ``flock`` refuses a second lock of one
+file even to the process that holds the first.
 """
 
 from __future__ import annotations

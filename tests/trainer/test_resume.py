@@ -88,7 +88,8 @@ def content(run_dir: Path, name: str):
     if name == "metrics.csv" or name.endswith("/metrics.csv"):
         return rows(file.parent)
     if name.endswith("config.json"):  # the resumed run's also records its resumes
-        return {k: v for k, v in json.loads(file.read_text()).items() if k not in ("resume", "resumes")}
+        saved = json.loads(file.read_text())
+        return {k: v for k, v in saved.items() if k not in ("resume", "resumes")}
     if name.endswith("state.pt"):
         return checkpoint_state(file)
     if name.endswith("manifest.json"):  # digests of the files compared one by one
