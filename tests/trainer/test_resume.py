@@ -96,7 +96,7 @@ def content(run_dir: Path, name: str):
         return sorted(json.loads(file.read_text())["files"])
     if name.endswith("meta.json"):  # the same keys, in the order they were first written
         return json.loads(file.read_text())
-    if file.suffix == ".memmap":
+    if file.suffix == ".memmap" and "storage" in Path(name).parts:  # a buffer's storage
         return stored_rows(file)
     return file.read_bytes()
 
