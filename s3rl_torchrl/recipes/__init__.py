@@ -6,7 +6,9 @@ checkout (editable install) reads it in place. :func:`config_dir` finds whicheve
 
 Both recipes share two helpers around Hydra's output directory: :class:`HydraOutput` takes back
 the directory Hydra made for a rejected command, and :func:`console_to_log` copies what a
-command prints into Hydra's job log (``train.log``, ``evaluate.log``).
+command prints into Hydra's job log (``train.log``, ``evaluate.log``). What ``s3rl-train`` checks
+before Hydra writes anything (its config, every job of a sweep, its run directory) is a Hydra
+callback: :class:`s3rl_torchrl.recipes.launch_checks.LaunchChecks`.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+
+from s3rl_torchrl.trainer.run_lock import LOCK_FILE, RunLock
 
 CONFIG_NAMES = ("train.yaml", "evaluate.yaml")
 
@@ -85,7 +89,8 @@ def quiet_known_warnings() -> None:
 STARTED = time.time()
 _TIMESTAMP_SLACK = 2.0
 # What Hydra writes into a job's output directory before the task function runs: the job's
-# log (train.log, evaluate.log) and these files in `hydra.output_subdir` (.hydra/).
+# log (train.log, evaluate.log) and these files in `hydra.output_subdir` (.hydra/); and
+# s3rl-train's lock file (launch_checks.py).
 HYDRA_CONFIG_FILES = frozenset({"config.yaml", "hydra.yaml", "overrides.yaml"})
 
 
@@ -124,6 +129,8 @@ class HydraOutput:
         if not self.dir.is_dir() or self.dir.resolve() in (self.cwd.resolve(), Path.home()):
             return False
         allowed = {file.name for file, fresh in self.log_files.items() if fresh}
+        if _written_by_this_invocation(self.dir / LOCK_FILE):  # LaunchChecks', this command's
+            allowed.add(LOCK_FILE)
         if self.hydra_subdir is not None:
             allowed.add(self.hydra_subdir)
             subdir = self.dir / self.hydra_subdir
@@ -153,6 +160,8 @@ class HydraOutput:
                 handler.close()
         for file in self.log_files:
             file.unlink(missing_ok=True)
+        RunLock.release_claim(self.dir)
+        (self.dir / LOCK_FILE).unlink(missing_ok=True)
         if self.hydra_subdir is not None and (self.dir / self.hydra_subdir).is_dir():
             for name in HYDRA_CONFIG_FILES:
                 (self.dir / self.hydra_subdir / name).unlink(missing_ok=True)

@@ -36,6 +36,7 @@ from s3rl_torchrl.trainer import (
     register_configs,
     validate,
 )
+from s3rl_torchrl.trainer.config import check_seed
 from s3rl_torchrl.trainer.evaluate_checkpoint import eval_settings, evaluate_policy, load_policy
 
 CONFIG_DIR = str(config_dir())
@@ -69,6 +70,8 @@ class EvalCommandConfig:
                     f"Invalid value {value!r} for '{name}': must be in [1, inf), or null for "
                     "the run's own."
                 )
+        if self.seed is not None:
+            check_seed("seed", self.seed)
 
 
 register_configs()

@@ -126,6 +126,11 @@ def _main(cfg: DictConfig) -> float:
             if summary is not None:
                 seed = f" ({result.run_dir.name})" if len(results) > 1 else ""
                 print(summary.replace(":", f"{seed}:", 1))
+    # An interrupted run is not a finished one: `s3rl-train ... && s3rl-report ...` stops here
+    # (the status of the signal that stopped it, 128 + its number; its checkpoint is written).
+    stopped = [r.exit_status for r in results if r.status == "interrupted"]
+    if stopped:
+        sys.exit(stopped[0])
     # The return value is what Hydra sweepers (e.g. Optuna) optimise (the mean over seeds).
     rewards = [r.final_eval.reward_mean for r in results if r.final_eval is not None]
     return sum(rewards) / len(rewards) if len(rewards) == len(results) else float("nan")

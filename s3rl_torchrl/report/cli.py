@@ -248,7 +248,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv and argv[0] in SUBCOMMANDS:
         return SUBCOMMANDS[argv[0]](argv[1:])
     args = parse_args(argv)
+    from s3rl_torchrl.recipes import quiet_known_warnings
     from s3rl_torchrl.report.build import build_report, export_embedding_panels
+
+    # The embedding panels build each task's envs: MuJoCo's settotalmass warning, once per
+    # env built, says nothing a reader of the report can act on (recipes/__init__.py).
+    quiet_known_warnings()
 
     if args.export_runs is not None:
         if len(args.runs) > 1:

@@ -27,6 +27,7 @@ import hashlib
 import io
 import json
 import os
+import pickle
 import random
 import re
 import shutil
@@ -444,9 +445,19 @@ def load_checkpoint(path: str | Path) -> tuple[dict[str, Any], Path]:
     against its manifest first (:func:`verify_checkpoint`): a corrupt checkpoint raises
     :class:`CheckpointError` before anything is built or trained."""
     file = resolve_checkpoint(path)
-    verify_checkpoint(file.parent)
+    # A file without a manifest is an old checkpoint only if it reads as one: its warning
+    # ("written before checkpoints were verified") waits until then.
+    with warnings.catch_warnings(record=True) as unverified:
+        warnings.simplefilter("always", UnverifiedCheckpointWarning)
+        verify_checkpoint(file.parent)
     try:
         state = torch.load(file, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as err:  # weights_only refused an object
+        # Not torch's message: it advises weights_only=False, which would run the file's code.
+        raise CheckpointError(
+            f"{str(file)!r} is not a s3rl-torchrl checkpoint: it holds Python objects, where "
+            "a checkpoint holds only tensors and containers (nothing of it was run)."
+        ) from err
     except Exception as err:  # torch raises several types for truncated or foreign files
         raise CheckpointError(
             f"Checkpoint {str(file)!r} is corrupt or not a s3rl-torchrl checkpoint "
@@ -458,6 +469,8 @@ def load_checkpoint(path: str | Path) -> tuple[dict[str, Any], Path]:
             f"{str(file)!r} is not a s3rl-torchrl checkpoint (format {found!r}, "
             f"expected {CHECKPOINT_FORMAT!r})."
         )
+    for warning in unverified:
+        warnings.warn(warning.message, warning.category, stacklevel=2)
     return state, file.parent
 
 

@@ -59,6 +59,32 @@ DEVICES = ("cpu", "cuda", "mps")
 # The loggers whose log_video writes a video here (eval.video_interval): torchrl's MLflow logger
 # needs torchcodec and a system FFmpeg, `none` logs nothing.
 VIDEO_LOGGERS = ("csv", "tensorboard", "wandb")
+# Seeds a run accepts: Gymnasium refuses negative seeds, and the seeds derived from a run's
+# (its test envs' seed + 100000, the diagnostics' seed * 1000003 + epoch) must stay within
+# torch's 64 bits; numpy's legacy range is the conventional one and keeps both.
+SEED_MAX = 2**32 - 1
+
+
+def check_seed(path: str, seed: Any) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= SEED_MAX:
+        fail(path, seed, f"a seed must be an integer from 0 to {SEED_MAX} (2**32 - 1)")
+
+
+def check_device(path: str, device: str) -> None:
+    """The device must be one this torch build can use: fail here, not in the first step."""
+    import torch
+
+    check_choice(path, device, DEVICES)
+    if device == "cuda" and not torch.cuda.is_available():
+        build = "a CPU-only build" if torch.version.cuda is None else "a CUDA build"
+        fail(
+            path,
+            device,
+            f"this torch ({torch.__version__}, {build}) sees no CUDA device; use device=cpu, "
+            "or install a CUDA build of torch on a machine with a GPU (docs/installation.md)",
+        )
+    if device == "mps" and not torch.backends.mps.is_available():
+        fail(path, device, "this machine has no MPS device (Apple silicon); use device=cpu")
 
 
 def _check_cpp_compiler(path: str) -> None:
@@ -290,10 +316,13 @@ class TrainConfig:
             )
         for name in ("task", "algo", "network", "collector", "eval", "logger"):
             getattr(self, name).check(prefix + name)
-        check_choice(prefix + "device", self.device, DEVICES)
+        check_device(prefix + "device", self.device)
+        check_seed(prefix + "seed", self.seed)
         check_range(prefix + "threads", self.threads, 0)
         check_range(prefix + "save_interval", self.save_interval, 1)
-        if self.compile and self.device == "cpu":
+        # Only the SAC family compiles its loss (DDPG and PPO are always eager): their runs
+        # need no C++ compiler, whatever `compile` says.
+        if self.compile and self.device == "cpu" and family.name == "sac":
             _check_cpp_compiler(prefix + "compile")
         if self.seeds is not None:
             self._check_seeds(prefix + "seeds")
@@ -342,6 +371,8 @@ class TrainConfig:
             fail(path, seeds, "must hold at least one seed (or be null: one run with `seed`)")
         if any(isinstance(s, bool) or not isinstance(s, int) for s in seeds):
             fail(path, seeds, "must be integers")
+        for index, seed in enumerate(seeds):
+            check_seed(f"{path}[{index}]", seed)
         if len(set(seeds)) != len(seeds):
             fail(path, seeds, "must be distinct (a repeated seed would train the same run twice)")
         if not family_of(self.algo).seeds_in_one_process:

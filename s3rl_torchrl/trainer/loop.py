@@ -86,7 +86,12 @@ from s3rl_torchrl.trainer.evaluation import (
     format_table,
     pick_delivered,
 )
-from s3rl_torchrl.trainer.metrics import RunMetrics, ensure_new_run_dir, make_torchrl_logger
+from s3rl_torchrl.trainer.metrics import (
+    RunMetrics,
+    cut_back_to_checkpoint,
+    ensure_new_run_dir,
+    make_torchrl_logger,
+)
 from s3rl_torchrl.trainer.resume import RESUME_LOCKED, config_changes
 from s3rl_torchrl.trainer.run_lock import RunLock
 
@@ -123,6 +128,7 @@ class TrainResult:
     counters: Counters
     final_eval: EvalResult | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
+    exit_status: int = 0  # the command's (StopRequest.exit_status when interrupted)
 
 
 class StopRequest:
@@ -130,10 +136,20 @@ class StopRequest:
 
     def __init__(self) -> None:
         self.requested = False
+        self.signum: int | None = None  # the signal that asked for the stop (None: a callback)
         self._previous: dict[int, Any] = {}
 
     def __call__(self, signum=None, frame=None) -> None:
         self.requested = True
+        if signum is not None and self.signum is None:
+            self.signum = int(signum)
+
+    @property
+    def exit_status(self) -> int:
+        """The status a command stopped this way exits with: the shell's 128 + the signal's
+        number (130 for Ctrl-C, 143 for SIGTERM), so that ``s3rl-train ... && next`` does not
+        go on with an unfinished run; 1 for a stop without a signal."""
+        return 128 + self.signum if self.signum is not None else 1
 
     def install(self) -> None:
         for sig in (signal.SIGINT, signal.SIGTERM):
@@ -225,7 +241,7 @@ class Trainer:
             ensure_new_run_dir(self.run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         # No second process may train into this directory until the loop ends (run_lock.py).
-        self.run_lock = RunLock(self.run_dir)
+        self.run_lock = RunLock.take(self.run_dir)
 
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
@@ -277,7 +293,16 @@ class Trainer:
         # Why a resume cannot continue the interrupted run exactly (None: it can, or new run).
         self.inexact_resume: str | None = None
         if checkpoint is not None:
+            print(
+                f"Resuming {self.run_dir} at frame {checkpoint['counters']['frames']} of "
+                f"{cfg.collector.total_frames}"
+            )
             self._restore(checkpoint, checkpoint_dir)
+            # What the interrupted run logged after its checkpoint goes, before a logger opens
+            # (or, as TensorBoard's does, creates) a file.
+            cut_back_to_checkpoint(
+                self.run_dir, checkpoint.get("appended_files"), self.counters.frames
+            )
             record_resume(
                 self.run_dir,
                 saved,
@@ -294,9 +319,7 @@ class Trainer:
             project=cfg.logger.project,
             wandb_mode=cfg.logger.wandb_mode,
         )
-        self.metrics = RunMetrics(
-            self.run_dir, logger, resume_frames=self.counters.frames if checkpoint else None
-        )
+        self.metrics = RunMetrics(self.run_dir, logger, resume=checkpoint is not None)
         self.history: list[dict[str, Any]] = []
 
     # ----------------------------------------------------------------------------- hooks
@@ -629,7 +652,9 @@ class Trainer:
             f"Interrupted: checkpoint written to {self.run_dir / 'checkpoints' / 'latest'}; "
             f"continue with resume={self.run_dir}"
         )
-        return TrainResult(self.run_dir, "interrupted", self.counters, None, self.history)
+        return TrainResult(
+            self.run_dir, "interrupted", self.counters, None, self.history, self.stop.exit_status
+        )
 
     # ----------------------------------------------------------------------------- state
     def state_dict(self) -> dict[str, Any]:
@@ -658,6 +683,8 @@ class Trainer:
                 "last_losses": {k: v.detach().clone() for k, v in self._last_losses.items()},
                 "last_contrastive": dict(self._last_contrastive),
             },
+            # The size of every file the run appends to: a resume cuts them back to it.
+            "appended_files": self.metrics.appended_files(),
         }
 
     def _collector_state(self) -> dict[str, Any] | None:

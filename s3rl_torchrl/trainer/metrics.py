@@ -1,7 +1,11 @@
 """Run metrics: torchrl's loggers plus one ``metrics.csv`` table per run (one row per epoch).
 
-On resume both continue from the checkpoint's frame count: rows logged after that checkpoint
-(by the interrupted run) are dropped first, so the files have neither gaps nor duplicates.
+On resume both continue from the checkpoint's frame count: what the interrupted run appended
+after that checkpoint is cut off first, so the files have neither gaps nor duplicates. A
+checkpoint records the size of every file the run appends to (:func:`appended_files`); a
+resume cuts each back to that size and removes the ones created since
+(:func:`cut_back_to_checkpoint`). A checkpoint written before that record drops the rows whose
+step is past its frame count instead.
 """
 
 from __future__ import annotations
@@ -18,13 +22,14 @@ from torchrl.record.loggers.csv import CSVLogger
 
 METRICS_FILE = "metrics.csv"
 STEP_COLUMN = "frames"
+LOG_DIR = "logs"  # the torchrl logger's files, inside the run directory
 
 
 def make_torchrl_logger(
     backend: str, run_dir: Path, exp_name: str, project: str, wandb_mode: str
 ) -> Logger | None:
     """One of torchrl's loggers, writing inside the run directory (no server needed)."""
-    log_dir = run_dir / "logs"
+    log_dir = run_dir / LOG_DIR
     if backend == "none":
         return None
     if backend == "csv":
@@ -78,15 +83,80 @@ class Mp4CSVLogger(CSVLogger):
                 writer.append(frame)
 
 
-def _trim_csv(path: Path, max_step: int, step_index: int, has_header: bool) -> None:
-    """Drop rows whose step is beyond ``max_step`` (written after the last checkpoint)."""
+
+def _appended_by_the_run(relative: Path) -> bool:
+    """Whether the run only ever appends to this file (a path relative to the run directory):
+    ``metrics.csv``, and what the loggers append to in ``logs/``: the CSV logger's scalar files
+    (``scalars/<name>.csv``, ``scalars/lagrangian/value.csv``, ...), TensorBoard's event files,
+    MLflow's metric files. Not W&B's: its service process writes them in the background, so
+    their size at a checkpoint is no record boundary (a resumed run starts a new offline run);
+    not MLflow's ``meta.yaml`` nor the Hydra job log, which are rewritten or record the
+    invocation rather than the run."""
+    parts = relative.parts
+    if parts == (METRICS_FILE,):
+        return True
+    if not parts or parts[0] != LOG_DIR or "wandb" in parts:
+        return False
+    if relative.suffix == ".csv" or relative.name.startswith("events.out.tfevents."):
+        return True
+    return "mlruns" in parts and "metrics" in parts[parts.index("mlruns") :]
+
+
+def appended_files(run_dir: str | Path) -> dict[str, int]:
+    """The size of every file the run appends to (:func:`_appended_by_the_run`), by path
+    relative to the run directory: what a checkpoint records so that a resume can cut the files
+    back to it. Call it after the loggers have flushed."""
+    run_dir = Path(run_dir)
+    return {
+        path.relative_to(run_dir).as_posix(): path.stat().st_size for path in _appended(run_dir)
+    }
+
+
+def _appended(run_dir: Path) -> list[Path]:
+    candidates = [run_dir / METRICS_FILE, *(run_dir / LOG_DIR).rglob("*")]
+    return sorted(
+        path
+        for path in candidates
+        if path.is_file() and _appended_by_the_run(path.relative_to(run_dir))
+    )
+
+
+def cut_back_to_checkpoint(
+    run_dir: str | Path, recorded: dict[str, int] | None, frames: int
+) -> None:
+    """Undo what an interrupted run appended after its last checkpoint, before a resume logs
+    anything: each file the checkpoint ``recorded`` (:func:`appended_files`) is cut back to its
+    recorded size, and a file the run appends to that did not exist then is removed. Without a
+    record (a checkpoint written before it), the rows of ``metrics.csv`` and of the CSV logger's
+    scalar files (at any depth) whose step is past ``frames`` are dropped."""
+    run_dir = Path(run_dir)
+    if recorded is None:
+        if (run_dir / METRICS_FILE).is_file():
+            _trim_csv(run_dir / METRICS_FILE, frames, header=True)
+        for file in sorted((run_dir / LOG_DIR).glob("*/scalars/**/*.csv")):
+            _trim_csv(file, frames, header=False)
+        return
+    for path in _appended(run_dir):
+        size = recorded.get(path.relative_to(run_dir).as_posix())
+        if size is None:
+            path.unlink()
+        elif path.stat().st_size > size:
+            os.truncate(path, size)
+
+
+def _trim_csv(path: Path, max_step: int, header: bool) -> None:
+    """Drop rows whose step (the ``frames`` column; the first of a headerless scalar file) is
+    beyond ``max_step`` (written after the last checkpoint)."""
     with path.open(newline="") as f:
         rows = list(csv.reader(f))
-    header, body = (rows[:1], rows[1:]) if has_header else ([], rows)
+    head, body = (rows[:1], rows[1:]) if header else ([], rows)
+    step_index = head[0].index(STEP_COLUMN) if head else 0
     kept = [r for r in body if r and float(r[step_index]) <= max_step]
     if len(kept) != len(body):
+        # The line ends each file was written with: csv's for metrics.csv, "\n" for the
+        # CSV logger's.
         with path.open("w", newline="") as f:
-            csv.writer(f).writerows(header + kept)
+            csv.writer(f, lineterminator="\r\n" if header else "\n").writerows(head + kept)
 
 
 def ensure_new_run_dir(run_dir: str | Path) -> None:
@@ -99,22 +169,27 @@ def ensure_new_run_dir(run_dir: str | Path) -> None:
 
 
 class RunMetrics:
-    """Writes epoch rows to ``metrics.csv`` and every scalar to a torchrl logger."""
+    """Writes epoch rows to ``metrics.csv`` and every scalar to a torchrl logger. A resumed run
+    continues the files as :func:`cut_back_to_checkpoint` left them."""
 
-    def __init__(self, run_dir: Path, logger: Logger | None, resume_frames: int | None = None):
-        self.path = Path(run_dir) / METRICS_FILE
+    def __init__(self, run_dir: Path, logger: Logger | None, resume: bool = False):
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / METRICS_FILE
         self.logger = logger
         self.columns: list[str] | None = None
-        if resume_frames is None:
+        if not resume:
             ensure_new_run_dir(run_dir)
         if self.path.exists():
             with self.path.open(newline="") as f:
                 self.columns = next(csv.reader(f), None)
-            _trim_csv(self.path, resume_frames, self.columns.index(STEP_COLUMN), True)
-        scalars = getattr(getattr(logger, "experiment", None), "log_dir", None)
-        if resume_frames is not None and scalars is not None:
-            for file in Path(scalars, "scalars").glob("*.csv"):
-                _trim_csv(file, resume_frames, 0, False)
+
+    def appended_files(self) -> dict[str, int]:
+        """What a checkpoint records (:func:`appended_files`), once the logger has written
+        what it buffers (TensorBoard's writer holds events back)."""
+        flush = getattr(getattr(self.logger, "experiment", None), "flush", None)
+        if callable(flush):
+            flush()
+        return appended_files(self.run_dir)
 
     def log_scalars(self, values: dict[str, float], step: int) -> None:
         if self.logger is None:

@@ -248,7 +248,9 @@ class MultiSeedTrainer:
             f"continue with resume={self.run_dir} 'seeds=[{','.join(map(str, self.cfg.seeds))}]'"
         )
         runs = [
-            TrainResult(m.run_dir, "interrupted", m.counters, None, m.history)
+            TrainResult(
+                m.run_dir, "interrupted", m.counters, None, m.history, self.stop.exit_status
+            )
             for m in self.members
         ]
         return MultiSeedResult(self.run_dir, "interrupted", runs)

@@ -168,6 +168,24 @@ def test_a_checkpoint_without_manifest_loads_with_a_warning(tmp_path):
     assert state["counters"]["frames"] == 100
 
 
+def test_a_foreign_state_file_is_refused_without_torchs_advice(tmp_path):
+    # Another program's torch.save (no manifest, a Python object inside): neither the
+    # warning for old checkpoints nor torch's advice to load with weights_only=False, which
+    # would run the file's code.
+    import argparse
+    import warnings
+
+    torch.save({"args": argparse.Namespace(lr=1e-3)}, tmp_path / "state.pt")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(CheckpointError) as err:
+            load_checkpoint(tmp_path / "state.pt")
+    message = one_line(err)
+    assert "is not a s3rl-torchrl checkpoint: it holds Python objects" in message
+    assert "weights_only" not in message
+    assert not [w for w in caught if issubclass(w.category, UnverifiedCheckpointWarning)]
+
+
 def test_a_checkpoint_without_manifest_still_gets_its_buffer_sizes_checked(tmp_path):
     directory = saved(tmp_path / "latest")
     (directory / MANIFEST_FILE).unlink()
