@@ -324,7 +324,8 @@ def main(argv: list[str] | None = None) -> None:
     tables = table_rows(document_tasks(DOC))
     for doc in (READINGS, PROBE_NOTE) if args.research else (DOC,):
         doc.write_text(rewrite(doc.read_text(), tables))
-        print(f"{doc.relative_to(ROOT)}: tables rewritten")
+        shown = doc.relative_to(ROOT) if doc.is_relative_to(ROOT) else doc
+        print(f"{shown}: tables rewritten")
 
 
 if __name__ == "__main__":

@@ -154,7 +154,9 @@ def launch(args: argparse.Namespace) -> list[Path]:
             run_dir, cmd = todo.pop(0)
             run_dir.mkdir(parents=True, exist_ok=True)
             print("launch:", " ".join(cmd[3:]), flush=True)
-            log = (run_dir / "launch.log").open("a")
+            # Beside the run, not in it: s3rl-train refuses a directory holding another
+            # command's log (recipes/launch_checks.py).
+            log = (run_dir.parent / f"{run_dir.name}.launch.log").open("a")
             process = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=log, stderr=log)
             running.append((run_dir, process))
         for item in list(running):

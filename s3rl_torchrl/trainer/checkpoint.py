@@ -452,11 +452,18 @@ def load_checkpoint(path: str | Path) -> tuple[dict[str, Any], Path]:
         verify_checkpoint(file.parent)
     try:
         state = torch.load(file, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as err:  # weights_only refused an object
+    except pickle.UnpicklingError as err:
         # Not torch's message: it advises weights_only=False, which would run the file's code.
+        # torch raises this both for a class or function the file names (a "global") and for
+        # bytes that are no pickle at all.
+        if "global" in str(err):
+            raise CheckpointError(
+                f"{str(file)!r} is not a s3rl-torchrl checkpoint: it holds Python objects, "
+                "where a checkpoint holds only tensors and containers (nothing of it was run)."
+            ) from err
         raise CheckpointError(
-            f"{str(file)!r} is not a s3rl-torchrl checkpoint: it holds Python objects, where "
-            "a checkpoint holds only tensors and containers (nothing of it was run)."
+            f"Checkpoint {str(file)!r} is corrupt or not a s3rl-torchrl checkpoint (it does not "
+            "read as tensors and containers)."
         ) from err
     except Exception as err:  # torch raises several types for truncated or foreign files
         raise CheckpointError(
