@@ -7,6 +7,11 @@ import os
 import pytest
 import torch
 
+# First, before any test module imports MuJoCo (Gymnasium's robots, the benchmarks): the
+# package picks MuJoCo's headless GL backend on import, which MuJoCo reads once, when it is
+# first imported (s3rl_torchrl/_render_backend.py).
+import s3rl_torchrl  # noqa: F401, E402
+
 # Under pytest-xdist (make test: -n 2) each worker keeps to one intra-op thread: two workers
 # with two threads each on two cores stall one another (docs/benchmarks.md, threads).
 if os.environ.get("PYTEST_XDIST_WORKER"):
