@@ -50,6 +50,17 @@ def table1_runs(task: str, algo: str) -> dict[int, dict]:
     return found
 
 
+def complete_tasks(table1: list[list[str]]) -> list[str]:
+    """The tasks of a Table 1 (its rows: task, algo, ...) whose both algos have every seed
+    exported, in its order."""
+    return [
+        row[0]
+        for row in table1
+        if row[1] == "S3RL"
+        and all(len(table1_runs(row[0], algo)) == len(SEEDS) for algo in ("s3rl", "sac_lag"))
+    ]
+
+
 def pair_wins(task: str, policy, key: str, sign: float) -> float:
     """The share of a task's 9 pairs of runs (S3RL seed, SAC-Lag seed) in which S3RL's is
     better, a tie one half, counted from the runs' final_eval.json."""

@@ -28,6 +28,7 @@ from tests.docs._tables import (
     SEEDS,
     TABLE1_ROOTS,
     close,
+    complete_tasks,
     load_update_table1,
     numbers,
     pair_wins,
@@ -58,16 +59,6 @@ def paper_table1(task: str, algo: str) -> dict[str, float]:
     }
 
 
-def complete_tasks() -> list[str]:
-    """The tasks of Table 1 whose both algos have every seed exported, in its order."""
-    return [
-        row[0]
-        for row in TABLE1
-        if row[1] == "S3RL"
-        and all(len(table1_runs(row[0], algo)) == len(SEEDS) for algo in ("s3rl", "sac_lag"))
-    ]
-
-
 def test_table1_has_every_task_of_the_paper_for_both_algos():
     paper = {(v.task, v.algo) for v in load_paper_results() if v.table == "Table 1" and v.algo}
     written = {
@@ -78,7 +69,7 @@ def test_table1_has_every_task_of_the_paper_for_both_algos():
     }
     assert written == paper and len(TABLE1) == len(paper) == 32
     # Every task complete: the aggregate and the conclusion are over all sixteen.
-    assert len(complete_tasks()) == 16
+    assert len(complete_tasks(TABLE1)) == 16
 
 
 @pytest.mark.parametrize("row", TABLE1, ids=lambda row: f"{row[0]}-{row[1]}")
@@ -102,7 +93,7 @@ def table1_aggregate():
     from s3rl_torchrl.report.runs import find_runs, group_runs
 
     groups = group_runs([run for root in TABLE1_ROOTS for run in find_runs(RESULTS / root)])
-    complete = set(complete_tasks())
+    complete = set(complete_tasks(TABLE1))
     return aggregate([g for g in groups if g.task in complete], "s3rl")
 
 
@@ -121,7 +112,7 @@ def test_the_aggregate_is_rliables_over_the_sixteen_tasks():
     # The point estimates are the mean over the tasks of each task's 9 pairs of runs.
     for policy_name, policy in POLICIES:
         for j, (_, key, sign) in enumerate(READINGS):
-            wins = [pair_wins(task, policy, key, sign) for task in complete_tasks()]
+            wins = [pair_wins(task, policy, key, sign) for task in complete_tasks(TABLE1)]
             assert close(numbers(written[policy_name][j])[0], statistics.mean(wins))
 
 
@@ -131,7 +122,7 @@ def test_without_one_task_leaves_out_the_tasks_that_move_it_most():
     # in task order on a tie), and quote the aggregate's bootstrap over the rest.
     from s3rl_torchrl.report.aggregate import probability_of_improvement
 
-    complete = sorted(complete_tasks())
+    complete = sorted(complete_tasks(TABLE1))
     written = {row[0]: row[1:] for row in table_rows(TEXT, WITHOUT_ONE_TASK_HEADER)}
     answer = {row[0]: row[1:3] for row in table_rows(TEXT, ANSWER_HEADER)}
     assert len(written) == len(POLICIES) * len(READINGS)
@@ -168,7 +159,7 @@ def table1_cost_limit(task: str, algo: str) -> float:
 def test_cost_profile_counts_are_the_runs():
     # Counted here from each run's final evaluation and its config's limit: how many of an
     # algo's runs have cost / limit at or below 0, 0.2, 0.5, 1 and 2.
-    complete = complete_tasks()
+    complete = complete_tasks(TABLE1)
     runs = {algo: [] for algo in ALGOS.values()}
     for task in complete:
         for algo in ALGOS.values():
@@ -264,7 +255,7 @@ def test_the_count_of_paired_tests_below_005():
     # The conclusion's "3 of the 64 paired t-tests ... are below 0.05": per task, S3RL minus
     # SAC-Lag over seeds (scipy's ttest_rel), reward and cost, last policy and best-feasible.
     pvalues = []
-    for task in complete_tasks():
+    for task in complete_tasks(TABLE1):
         s3rl, sac_lag = table1_runs(task, "s3rl"), table1_runs(task, "sac_lag")
         for _, final in POLICIES:
             for key in ("reward_mean", "cost_mean"):
