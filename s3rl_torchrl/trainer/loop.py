@@ -205,6 +205,11 @@ def seed_everything(seed: int) -> None:
 class Trainer:
     """Holds a run's components; :meth:`run` is the loop. Build it with :func:`train`.
 
+    With ``cfg.resume`` the run continues from its checkpoint: ``trainer/resume.py`` reads and
+    checks it before anything is built (:meth:`Resume.read
+    <s3rl_torchrl.trainer.resume.Resume.read>`) and restores it once everything is
+    (:meth:`Resume.restore <s3rl_torchrl.trainer.resume.Resume.restore>`).
+
     ``hooks`` (name -> :class:`~s3rl_torchrl.hooks.TrainerHook`) are registered after the
     hooks the config switches on, before a resumed run restores their state;
     ``on_epoch_end(trainer, row)`` is an ``"epoch_end"`` op registered last.

@@ -280,37 +280,35 @@ class Resume:
         trainer.replay_buffer.loads(self.checkpoint_dir / REPLAY_DIR)
         trainer.updates.load(self.checkpoint_dir)
         trainer.load_state_dict(self.state)
-        trainer.inexact_resume = self._inexact(trainer)
+        reason = self._inexact_reason(trainer)
+        if reason is not None:
+            # The n-step windows held back from the last batch would run into the restarted
+            # episodes' first steps: they end where their episodes were cut.
+            trainer.updates.end_episodes()
+            print(
+                f"Resuming {trainer.run_dir} inexactly: {reason}; every training episode "
+                "restarts here, so the rest of the run differs from an uninterrupted one."
+            )
+        trainer.inexact_resume = reason
         # What the interrupted run logged after its checkpoint goes, before a logger opens
         # (or, as TensorBoard's does, creates) a file.
         cut_back_to_checkpoint(
             trainer.run_dir, self.state.get("appended_files"), trainer.counters.frames
         )
         record_resume(
-            trainer.run_dir,
-            self.saved,
-            to_container(self.cfg),
-            trainer.counters,
-            inexact=trainer.inexact_resume,
+            trainer.run_dir, self.saved, to_container(self.cfg), trainer.counters, inexact=reason
         )
 
-    def _inexact(self, trainer) -> str | None:
-        """Why the run cannot continue exactly (None: it can): the checkpoint has no collector
-        state (a task or batching that cannot be snapshot, or a checkpoint written before
-        checkpoints kept the envs' state) and frames are left to collect. Every training
-        episode then restarts, and the n-step windows held back from the last batch end where
-        their episodes were cut, so that they do not run into the restarted episodes."""
+    def _inexact_reason(self, trainer) -> str | None:
+        """Why the run cannot continue exactly, or None: frames are left to collect and the
+        checkpoint has no collector state to continue the training episodes with (a task or
+        batching that cannot be snapshot, or a checkpoint written before checkpoints kept the
+        envs' state), so every one of them restarts."""
         if self.state.get("collector") is not None or self.frames >= self.cfg.collector.total_frames:
             return None
-        reason = exact_restore_unsupported(trainer.train_env) or (
+        return exact_restore_unsupported(trainer.train_env) or (
             "the checkpoint was written before checkpoints kept the envs' state"
         )
-        trainer.updates.end_episodes()
-        print(
-            f"Resuming {trainer.run_dir} inexactly: {reason}; every training episode restarts "
-            "here, so the rest of the run differs from an uninterrupted one."
-        )
-        return reason
 
 
 # ------------------------------------------------------------------------------ the record
