@@ -3,7 +3,9 @@
 Between packages: each layer's package, imported alone in a fresh interpreter, must not pull in
 a module of a higher layer. Inside a package: the files' imports of each other (at the top, in
 a function, or for type checking only) form no circle, so that one file of a pair is always
-the lower one (a circle like ``config.py`` <-> ``builders.py`` fails)."""
+the lower one (a circle like ``config.py`` <-> ``builders.py`` fails). A resume is one file's
+business: of the trainer's files, only ``resume.py`` imports what a resume checks, cuts back
+and restores."""
 
 from __future__ import annotations
 
@@ -146,3 +148,42 @@ def test_a_file_importing_its_own_package_is_a_circle(tmp_path):
     (tmp_path / "__init__.py").write_text("from s3rl_torchrl.hooks.labels import GradedLabels\n")
     (tmp_path / "labels.py").write_text("from s3rl_torchrl.hooks import TrainerHook\n")
     assert find_cycle(import_graph(tmp_path, "hooks")) == ["__init__", "labels", "__init__"]
+
+
+# ------------------------------------------------------------------------------ resume
+# What only trainer/resume.py uses (docs/architecture.md, "Resume"): the checks of a resumed
+# config, the cut-back of the run's files, whether the envs can continue exactly. The loop
+# calls Resume.read before it builds and Resume.restore once it has built.
+RESUME_ONLY = {
+    "RESUME_LOCKED",
+    "check_compatible",
+    "check_total_frames",
+    "config_changes",
+    "cut_back_to_checkpoint",
+    "exact_restore_unsupported",
+    "record_resume",
+}
+
+
+def imported_names(path: Path) -> set[str]:
+    """The names a file imports from the package (``from s3rl_torchrl... import name``)."""
+    return {
+        alias.name
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("s3rl_torchrl")
+        for alias in node.names
+    }
+
+
+def test_only_resume_py_checks_cuts_back_and_restores_a_resume():
+    trainer = ROOT / "trainer"
+    found = {
+        path.name: sorted(imported_names(path) & RESUME_ONLY)
+        for path in sorted(trainer.glob("*.py"))
+        if path.name != "resume.py"
+    }
+    assert {name: names for name, names in found.items() if names} == {}
+    assert "Resume" in imported_names(trainer / "loop.py")
+    assert {"cut_back_to_checkpoint", "exact_restore_unsupported"} <= imported_names(
+        trainer / "resume.py"
+    )

@@ -34,8 +34,7 @@ from s3rl_torchrl.trainer import (
     train_seeds,
     validate,
 )
-from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, resolve_checkpoint
-from s3rl_torchrl.trainer.resume import resume_config
+from s3rl_torchrl.trainer.resume import holds_run, resume_config
 
 CONFIG_DIR = str(config_dir())
 register_configs()
@@ -51,19 +50,6 @@ def reject(err: Exception, output: HydraOutput) -> NoReturn:
         with console_to_log(__name__) as log:
             log.error("s3rl-train: %s", err)
     sys.exit(2)
-
-
-def holds_run(run_dir: str) -> bool:
-    """Whether ``run_dir`` holds a run to continue (a checkpoint, or a multi-seed group)."""
-    from pathlib import Path
-
-    if (Path(run_dir) / GROUP_FILE).is_file():
-        return True
-    try:
-        resolve_checkpoint(run_dir)
-    except CheckpointError:
-        return False
-    return True
 
 
 def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:

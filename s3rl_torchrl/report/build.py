@@ -530,20 +530,55 @@ def build_report(
         aggregate_reps: bootstrap resamples of each aggregate estimate.
         aggregate_seed: the seed of the aggregate's bootstrap (same seed, same intervals).
     """
-    from s3rl_torchrl.report import figures
-
     roots = [Path(root)] if isinstance(root, (str, Path)) else [Path(r) for r in root]
     if not roots:
         raise ReportError("No runs directory given.")
     out = Path(out) if out is not None else roots[0] / "report"
     runs = [run for r in roots for run in find_runs(r)]
-    where = ", ".join(f"`{r}`" for r in roots)
     groups = group_runs(runs, group_by)
     by_task = _by_task(groups)
     report = Report(out / REPORT_FILE, groups=groups)
     out.mkdir(parents=True, exist_ok=True)
 
+    lines = _title_section(runs, roots, groups, group_by, command, report)
+    _note_setting_differences(by_task, group_by, report)
+    lines += _table1_section(by_task, reference)
+    lines += _differences_section(by_task, reference, pairs)
+    lines += _paper_section(by_task)
+    lines += _peers_section(by_task)
+    if aggregate is not False:
+        lines += _aggregate_section(
+            groups, out, reference, pairs, aggregate, aggregate_reps, aggregate_seed, report
+        )
+    lines += _figure2_section(by_task, out, reference, report)
+    lines += _critic_section(groups, by_task, out, reference, report)
+    finished = any(r.finished for r in runs)
+    if finished:
+        lines += _figure3_section(by_task, out, reference, report)
+    lines += _figure4_section(
+        by_task, out, reference, embeddings and finished, embedding_episodes, tsne_states,
+        report,
+    )
+    lines += _graded_probe(by_task, reference)
+    lines += _notes_section(report.notes)
+    report.path.write_text("\n".join(lines))
+    return report
+
+
+# ------------------------------------------------------------------------------ the sections
+# Each returns its lines of report.md (a heading, its text, its tables, a blank line) and adds
+# its figure files and notes to the report.
+def _title_section(
+    runs: Sequence[Run],
+    roots: Sequence[Path],
+    groups: Sequence[RunGroup],
+    group_by: Sequence[str],
+    command: str | None,
+    report: Report,
+) -> list[str]:
+    """The title, what the report was generated from, and the unfinished runs."""
     finished = [r for r in runs if r.finished]
+    where = ", ".join(f"`{r}`" for r in roots)
     lines = [
         "# S3RL results report",
         "",
@@ -562,8 +597,14 @@ def build_report(
         lines.append("")
     if not finished:
         report.notes.append("No run is finished: the tables are empty.")
+    return lines
 
-    # Algos of one task compared with each other should differ in the algo only.
+
+def _note_setting_differences(
+    by_task: dict[str, list[RunGroup]], group_by: Sequence[str], report: Report
+) -> None:
+    """A note per task whose algos were run with different settings besides the algo (algos
+    of one task compared with each other should differ in the algo only)."""
     for task, task_groups in by_task.items():
         firsts = [g.runs[0] for g in task_groups]
         diff = config_differences(firsts, (*RUN_SPECIFIC_KEYS, "algo", *group_by))
@@ -574,7 +615,10 @@ def build_report(
                 f"algo: {keys} (in the order {', '.join(g.label for g in task_groups)})."
             )
 
-    lines += [
+
+def _table1_section(by_task: dict[str, list[RunGroup]], reference: str) -> list[str]:
+    """Table 1 (the final deterministic evaluation) and which of the paper's cells it covers."""
+    return [
         "## Table 1: final deterministic evaluation",
         "",
         "Mean ± std of the final evaluation (`final_eval.json`). *evaluated*: the policy at "
@@ -590,6 +634,14 @@ def build_report(
         *_table1(by_task, reference),
         "",
         *_table1_coverage(by_task, reference),
+    ]
+
+
+def _differences_section(
+    by_task: dict[str, list[RunGroup]], reference: str, pairs: Sequence[tuple[str, str]]
+) -> list[str]:
+    """The reference against every other algo (and ``pairs``): differences and their tests."""
+    return [
         f"## {reference} vs the other algos",
         "",
         f"Difference of means ({reference} minus the other). Paired t-test over the seeds both "
@@ -603,6 +655,12 @@ def build_report(
         "",
         *_differences(by_task, reference, pairs),
         "",
+    ]
+
+
+def _paper_section(by_task: dict[str, list[RunGroup]]) -> list[str]:
+    """The paper's Tables 1 and 2 beside ours, then the full Table 1 of the paper's tasks."""
+    return [
         "## Comparison with the paper",
         "",
         f"The paper's numbers (\"{PAPER_TITLE}\", Table 1: 10 evaluation episodes after "
@@ -615,6 +673,12 @@ def build_report(
         *_paper_comparison(by_task),
         "",
         *_table1_full(by_task),
+    ]
+
+
+def _peers_section(by_task: dict[str, list[RunGroup]]) -> list[str]:
+    """OmniSafe's, FSRL's and DSRL's published numbers on these tasks, beside ours."""
+    return [
         "## Beside other libraries' published results",
         "",
         "What OmniSafe's off-policy benchmark (Table 2: 10 evaluation episodes over several "
@@ -629,19 +693,37 @@ def build_report(
         "",
     ]
 
-    if aggregate is not False:
-        from s3rl_torchrl.report.aggregate import aggregate_section, rliable_problem
 
-        if aggregate and rliable_problem() is not None:
-            raise ReportError(f"--aggregate: {rliable_problem()}")
-        section, files, notes = aggregate_section(groups, out, reference, pairs,
-                                                  aggregate_reps, aggregate_seed)
-        lines += section
-        report.figures += files
-        report.notes += notes
+def _aggregate_section(
+    groups: Sequence[RunGroup],
+    out: Path,
+    reference: str,
+    pairs: Sequence[tuple[str, str]],
+    required: bool | None,
+    reps: int,
+    seed: int,
+    report: Report,
+) -> list[str]:
+    """The aggregate over tasks (``report.aggregate``); ``required``: a ReportError without
+    rliable (None: the section says what to install)."""
+    from s3rl_torchrl.report.aggregate import aggregate_section, rliable_problem
+
+    if required and rliable_problem() is not None:
+        raise ReportError(f"--aggregate: {rliable_problem()}")
+    section, files, notes = aggregate_section(groups, out, reference, pairs, reps, seed)
+    report.figures += files
+    report.notes += notes
+    return section
+
+
+def _figure2_section(
+    by_task: dict[str, list[RunGroup]], out: Path, reference: str, report: Report
+) -> list[str]:
+    """Figure 2: the learning curves of every run, unfinished ones included."""
+    from s3rl_torchrl.report import figures
 
     report.figures += figures.learning_curves(by_task, out, reference)
-    lines += [
+    return [
         "## Figure 2: learning curves",
         "",
         "Evaluation reward and cost per epoch (`metrics.csv`) against environment steps; mean "
@@ -650,80 +732,112 @@ def build_report(
         "![Figure 2](figure2_learning_curves.png)",
         "",
     ]
+
+
+def _critic_section(
+    groups: Sequence[RunGroup],
+    by_task: dict[str, list[RunGroup]],
+    out: Path,
+    reference: str,
+    report: Report,
+) -> list[str]:
+    """The critic diagnostics of the groups that logged them (none: no section)."""
+    from s3rl_torchrl.report import figures
+
     # Runs of every version log train/cost_q; runs since the critic diagnostics also critic/*.
     diagnosed = [g for g in groups if any("train/cost_q" in r.metrics[0] for r in g.runs
                                           if r.metrics)]
-    if diagnosed:
-        diagnosed_by_task = {
-            task: [g for g in task_groups if g in diagnosed]
-            for task, task_groups in by_task.items()
-        }
-        diagnosed_by_task = {t: gs for t, gs in diagnosed_by_task.items() if gs}
-        report.figures += figures.critic_diagnostics(diagnosed_by_task, out, reference)
-        lines += [
-            "## Critic diagnostics",
-            "",
-            "Per epoch (`critic/*`, `grad/*` and `train/alpha` of `metrics.csv`): the cost and "
-            "reward critics at the steps of the last 10 finished training episodes against the "
-            "discounted returns that followed them, alpha, and the share of the actor's gradient "
-            "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\"). "
-            "Runs written before those columns existed count their negative cost critics on "
-            "`train/cost_q` (the last gradient step's batch mean at `a ~ pi`), draw it and "
-            "`train/reward_q` dotted in the figure, and show `-` for the rest.",
-            "",
-            *_critic_table(diagnosed),
-            "",
-            "![Critic diagnostics](critic_diagnostics.png)",
-            "",
-        ]
-    if finished:
-        report.figures += figures.safe_occupancy_bars(by_task, out, reference)
-        lines += [
-            "## Figure 3: safe-state occupancy",
-            "",
-            "Percentage of final-evaluation steps with zero cost, mean ± std over seeds; pp: "
-            f"percentage points, {reference} minus the other algo.",
-            "",
-            "![Figure 3](figure3_safe_occupancy.png)",
-            "",
-            *_occupancy(by_task, reference),
-            "",
-        ]
+    if not diagnosed:
+        return []
+    diagnosed_by_task = {
+        task: [g for g in task_groups if g in diagnosed]
+        for task, task_groups in by_task.items()
+    }
+    diagnosed_by_task = {t: gs for t, gs in diagnosed_by_task.items() if gs}
+    report.figures += figures.critic_diagnostics(diagnosed_by_task, out, reference)
+    return [
+        "## Critic diagnostics",
+        "",
+        "Per epoch (`critic/*`, `grad/*` and `train/alpha` of `metrics.csv`): the cost and "
+        "reward critics at the steps of the last 10 finished training episodes against the "
+        "discounted returns that followed them, alpha, and the share of the actor's gradient "
+        "norm that the `lambda Q_c` term makes (docs/objectives.md, \"Critic diagnostics\"). "
+        "Runs written before those columns existed count their negative cost critics on "
+        "`train/cost_q` (the last gradient step's batch mean at `a ~ pi`), draw it and "
+        "`train/reward_q` dotted in the figure, and show `-` for the rest.",
+        "",
+        *_critic_table(diagnosed),
+        "",
+        "![Critic diagnostics](critic_diagnostics.png)",
+        "",
+    ]
 
-    lines += ["## Figure 4: policy-encoder embeddings and linear probe", ""]
-    if embeddings and finished:
-        panels, rows = _embedding_panels(by_task, reference, embedding_episodes, tsne_states,
-                                         report.notes)
-        if panels:
-            report.figures += figures.embedding_tsne(panels, out)
-            lines += [
-                "States of deterministic evaluation rollouts of one checkpoint per algo "
-                "(`checkpoints/latest` of the lowest finished seed; *rollouts*: env copies, "
-                "each the task's episode length or `eval.max_steps`), embedded by the policy "
-                "encoder and coloured by their label (safe: the step from that state costs "
-                f"nothing; t-SNE of at most {tsne_states} of them, drawn with a fixed seed). "
-                "An exported results tree (`--export-runs`) keeps each panel as "
-                "`figure4_states.csv` / `figure4_probe.json` beside the run, drawn here when "
-                "the checkpoint is gone. Probe (on all of them): a logistic regression "
-                "predicting the label from the embedding, accuracy (chance: majority class) "
-                "and ROC AUC on a held-out 30%. *training*: the `probe/accuracy` and "
-                "`probe/auc` columns of `metrics.csv` at the last epoch (class-balanced "
-                "replay-buffer sample), mean ± std over finished seeds.",
-                "",
-                "![Figure 4](figure4_embedding_tsne.png)",
-                "",
-                *_table(["task", "algo", "seed", "rollouts", "states safe / unsafe",
-                         "probe accuracy (chance)", "probe AUC", "training probe accuracy",
-                         "training probe AUC"], rows, "lllrrrrrr"),
-                "",
-            ]
-        else:
-            lines += ["No checkpoint to roll out and no stored panel.", ""]
-    else:
-        lines += ["Not drawn (`--no-embeddings`, or no finished run).", ""]
 
-    lines += _graded_probe(by_task, reference)
-    if report.notes:
-        lines += ["## Notes", "", *[f"- {note}" for note in report.notes], ""]
-    report.path.write_text("\n".join(lines))
-    return report
+def _figure3_section(
+    by_task: dict[str, list[RunGroup]], out: Path, reference: str, report: Report
+) -> list[str]:
+    """Figure 3: the safe-state occupancy of the final evaluation (finished runs)."""
+    from s3rl_torchrl.report import figures
+
+    report.figures += figures.safe_occupancy_bars(by_task, out, reference)
+    return [
+        "## Figure 3: safe-state occupancy",
+        "",
+        "Percentage of final-evaluation steps with zero cost, mean ± std over seeds; pp: "
+        f"percentage points, {reference} minus the other algo.",
+        "",
+        "![Figure 3](figure3_safe_occupancy.png)",
+        "",
+        *_occupancy(by_task, reference),
+        "",
+    ]
+
+
+def _figure4_section(
+    by_task: dict[str, list[RunGroup]],
+    out: Path,
+    reference: str,
+    draw: bool,
+    episodes: int,
+    tsne_states: int,
+    report: Report,
+) -> list[str]:
+    """Figure 4: the policy encoder's embeddings and their linear probe, when ``draw`` (the
+    embeddings asked for and a run finished)."""
+    from s3rl_torchrl.report import figures
+
+    lines = ["## Figure 4: policy-encoder embeddings and linear probe", ""]
+    if not draw:
+        return lines + ["Not drawn (`--no-embeddings`, or no finished run).", ""]
+    panels, rows = _embedding_panels(by_task, reference, episodes, tsne_states, report.notes)
+    if not panels:
+        return lines + ["No checkpoint to roll out and no stored panel.", ""]
+    report.figures += figures.embedding_tsne(panels, out)
+    return lines + [
+        "States of deterministic evaluation rollouts of one checkpoint per algo "
+        "(`checkpoints/latest` of the lowest finished seed; *rollouts*: env copies, "
+        "each the task's episode length or `eval.max_steps`), embedded by the policy "
+        "encoder and coloured by their label (safe: the step from that state costs "
+        f"nothing; t-SNE of at most {tsne_states} of them, drawn with a fixed seed). "
+        "An exported results tree (`--export-runs`) keeps each panel as "
+        "`figure4_states.csv` / `figure4_probe.json` beside the run, drawn here when "
+        "the checkpoint is gone. Probe (on all of them): a logistic regression "
+        "predicting the label from the embedding, accuracy (chance: majority class) "
+        "and ROC AUC on a held-out 30%. *training*: the `probe/accuracy` and "
+        "`probe/auc` columns of `metrics.csv` at the last epoch (class-balanced "
+        "replay-buffer sample), mean ± std over finished seeds.",
+        "",
+        "![Figure 4](figure4_embedding_tsne.png)",
+        "",
+        *_table(["task", "algo", "seed", "rollouts", "states safe / unsafe",
+                 "probe accuracy (chance)", "probe AUC", "training probe accuracy",
+                 "training probe AUC"], rows, "lllrrrrrr"),
+        "",
+    ]
+
+
+def _notes_section(notes: Sequence[str]) -> list[str]:
+    """The notes the sections gathered (none: no section)."""
+    if not notes:
+        return []
+    return ["## Notes", "", *[f"- {note}" for note in notes], ""]

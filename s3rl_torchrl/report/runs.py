@@ -51,7 +51,7 @@ RUN_SPECIFIC_KEYS = (
     "device",
     "save_interval",
     "eval.random_baseline",
-    "resumes",  # what each resume changed (trainer.loop.record_resume)
+    "resumes",  # what each resume changed (trainer.resume.record_resume)
 )
 
 

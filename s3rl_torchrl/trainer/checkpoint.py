@@ -480,21 +480,3 @@ def load_checkpoint(path: str | Path) -> tuple[dict[str, Any], Path]:
         warnings.warn(warning.message, warning.category, stacklevel=2)
     return state, file.parent
 
-
-def check_compatible(saved: dict[str, Any], current: dict[str, Any], keys: list[str]) -> None:
-    """Fail clearly when a resumed run's config differs where the saved weights depend on it."""
-
-    def get(cfg: dict, dotted: str):  # None where the family has no such field (PPO's n_step)
-        for part in dotted.split("."):
-            cfg = cfg.get(part) if isinstance(cfg, dict) else None
-        return cfg
-
-    diffs = [
-        f"{key}: checkpoint has {get(saved, key)!r}, the current config has {get(current, key)!r}"
-        for key in keys
-        if get(saved, key) != get(current, key)
-    ]
-    if diffs:
-        raise CheckpointError(
-            "The checkpoint does not match the current configuration:\n  " + "\n  ".join(diffs)
-        )

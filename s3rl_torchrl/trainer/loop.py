@@ -47,7 +47,7 @@ from tensordict import TensorDict, TensorDictBase
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.algorithms import Agent
-from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, restore_env
+from s3rl_torchrl.envs.state import env_snapshot, restore_env
 from s3rl_torchrl.hooks import (
     HOOK_POINTS,
     CriticDiagnostics,
@@ -64,17 +64,13 @@ from s3rl_torchrl.trainer.builders import (
     set_torch_threads,
 )
 from s3rl_torchrl.trainer.checkpoint import (
-    REPLAY_DIR,
-    CheckpointError,
     capture_rng_state,
-    check_compatible,
     check_writable,
-    load_checkpoint,
     restore_rng_state,
     save_checkpoint,
 )
 from s3rl_torchrl.trainer.collector import ResumableCollector
-from s3rl_torchrl.trainer.config import TrainConfig, saved_train_config, to_container
+from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.evaluation import (
     BestFeasible,
@@ -87,15 +83,15 @@ from s3rl_torchrl.trainer.evaluation import (
     pick_delivered,
 )
 from s3rl_torchrl.trainer.metrics import (
+    CONFIG_FILE,
+    FINAL_EVAL_FILE,
     RunMetrics,
-    cut_back_to_checkpoint,
     ensure_new_run_dir,
     make_torchrl_logger,
 )
-from s3rl_torchrl.trainer.resume import RESUME_LOCKED, config_changes
+from s3rl_torchrl.trainer.resume import Resume
 from s3rl_torchrl.trainer.run_lock import RunLock
 
-FINAL_EVAL_FILE = "final_eval.json"
 CONTRASTIVE_DIAGNOSTICS = (
     "loss_infonce",
     "pos_similarity",
@@ -103,7 +99,6 @@ CONTRASTIVE_DIAGNOSTICS = (
     "accuracy",
     "mi_lower_bound",
 )
-CONFIG_FILE = "config.json"
 BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
 
 
@@ -210,6 +205,11 @@ def seed_everything(seed: int) -> None:
 class Trainer:
     """Holds a run's components; :meth:`run` is the loop. Build it with :func:`train`.
 
+    With ``cfg.resume`` the run continues from its checkpoint: ``trainer/resume.py`` reads and
+    checks it before anything is built (:meth:`Resume.read
+    <s3rl_torchrl.trainer.resume.Resume.read>`) and restores it once everything is
+    (:meth:`Resume.restore <s3rl_torchrl.trainer.resume.Resume.restore>`).
+
     ``hooks`` (name -> :class:`~s3rl_torchrl.hooks.TrainerHook`) are registered after the
     hooks the config switches on, before a resumed run restores their state;
     ``on_epoch_end(trainer, row)`` is an ``"epoch_end"`` op registered last.
@@ -224,25 +224,31 @@ class Trainer:
     ) -> None:
         self.cfg = cfg
         self.stop = StopRequest()
-        checkpoint = saved = None
-        if cfg.resume:
-            checkpoint, checkpoint_dir = load_checkpoint(cfg.resume)
-            # The run's config as this version reads it (trainer/config.py: saved_config_node).
-            saved = to_container(saved_train_config(checkpoint["config"]))
-            check_compatible(saved, to_container(cfg), RESUME_LOCKED)
-            check_total_frames(cfg, checkpoint["counters"]["frames"])
-            run_dir = checkpoint_dir.parent.parent  # <run>/checkpoints/latest
-        self.run_dir = Path(run_dir)
-        # A read-only run directory: one clean line before anything is built or trained.
-        check_writable(self.run_dir)
-        check_writable(self.run_dir / "checkpoints")
-        if checkpoint is None:
-            # Before anything is built or written, so that run's files stay as they are.
-            ensure_new_run_dir(self.run_dir)
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        # No second process may train into this directory until the loop ends (run_lock.py).
-        self.run_lock = RunLock.take(self.run_dir)
+        # A resume's checkpoint, read, verified and checked against cfg before anything is
+        # built or written (resume.py); it names the run directory.
+        resume = Resume.read(cfg) if cfg.resume else None
+        self.run_dir = resume.run_dir if resume is not None else Path(run_dir)
+        self.run_lock = _take_run_dir(self.run_dir, new=resume is None)
+        labels = self._build()
+        self._register_hooks(labels, hooks, on_epoch_end)
+        if resume is not None:
+            resume.restore(self)  # the interrupted run's state; its files cut back to it
+        else:
+            (self.run_dir / CONFIG_FILE).write_text(json.dumps(to_container(cfg), indent=2))
+        logger = make_torchrl_logger(
+            cfg.logger.backend,
+            self.run_dir,
+            exp_name=f"{cfg.algo.name}_{cfg.task.name}_seed{cfg.seed}",
+            project=cfg.logger.project,
+            wandb_mode=cfg.logger.wandb_mode,
+        )
+        self.metrics = RunMetrics(self.run_dir, logger, resume=resume is not None)
+        self.history: list[dict[str, Any]] = []
 
+    def _build(self) -> GradedLabels | None:
+        """The run's components, seeded, and its progress at the start of a run; returns the
+        graded labels' hook, if the run stores a label."""
+        cfg = self.cfg
         set_torch_threads(cfg.threads)
         seed_everything(cfg.seed)
         # A graded safety label stored with every step, when the contrastive phase contrasts
@@ -261,7 +267,29 @@ class Trainer:
         # What the algorithm's update schedule stores and samples (algorithms/schedule.py).
         self.updates = build_updates(cfg, self.agent, self.replay_buffer, labels)
         self.schedule = self.updates.schedule
-        # The hooks the config asks for (hooks/); each registers its ops and its state.
+        self.counters = Counters()
+        self.best = BestFeasible()
+        epochs = cfg.eval.delivery_epochs
+        self.delivery = DeliveryCandidates(epochs) if epochs else None  # eval.delivery_epochs
+        # The collector and, until it is built on resume, the checkpoint's collector state.
+        self._collector: ResumableCollector | None = None
+        self._resume_collector: dict[str, Any] | None = None
+        self._train_episodes: list[tuple[float, float]] = []  # (reward, cost) this epoch
+        self._last_losses: dict[str, torch.Tensor] = {}
+        self._last_contrastive: dict[str, float] = {}
+        # Why a resume cannot continue the interrupted run exactly (None: it can, or new run).
+        self.inexact_resume: str | None = None
+        return labels
+
+    def _register_hooks(
+        self,
+        labels: GradedLabels | None,
+        hooks: dict[str, TrainerHook] | None,
+        on_epoch_end: Callable[[Trainer, dict[str, Any]], None] | None,
+    ) -> None:
+        """The hooks the config asks for (hooks/; each registers its ops and its state), then
+        ``hooks``, then ``on_epoch_end``."""
+        cfg = self.cfg
         self._ops: dict[str, list[Callable]] = {point: [] for point in HOOK_POINTS}
         self._hooks: dict[str, TrainerHook] = {}
         if labels is not None:
@@ -280,47 +308,6 @@ class Trainer:
             hook.register(self, name)
         if on_epoch_end is not None:
             self.register_op("epoch_end", on_epoch_end)
-        self.counters = Counters()
-        self.best = BestFeasible()
-        epochs = cfg.eval.delivery_epochs
-        self.delivery = DeliveryCandidates(epochs) if epochs else None  # eval.delivery_epochs
-        # The collector and, until it is built on resume, the checkpoint's collector state.
-        self._collector: ResumableCollector | None = None
-        self._resume_collector: dict[str, Any] | None = None
-        self._train_episodes: list[tuple[float, float]] = []  # (reward, cost) this epoch
-        self._last_losses: dict[str, torch.Tensor] = {}
-        self._last_contrastive: dict[str, float] = {}
-        # Why a resume cannot continue the interrupted run exactly (None: it can, or new run).
-        self.inexact_resume: str | None = None
-        if checkpoint is not None:
-            print(
-                f"Resuming {self.run_dir} at frame {checkpoint['counters']['frames']} of "
-                f"{cfg.collector.total_frames}"
-            )
-            self._restore(checkpoint, checkpoint_dir)
-            # What the interrupted run logged after its checkpoint goes, before a logger opens
-            # (or, as TensorBoard's does, creates) a file.
-            cut_back_to_checkpoint(
-                self.run_dir, checkpoint.get("appended_files"), self.counters.frames
-            )
-            record_resume(
-                self.run_dir,
-                saved,
-                to_container(cfg),
-                self.counters,
-                inexact=self.inexact_resume,
-            )
-        else:
-            (self.run_dir / CONFIG_FILE).write_text(json.dumps(to_container(cfg), indent=2))
-        logger = make_torchrl_logger(
-            cfg.logger.backend,
-            self.run_dir,
-            exp_name=f"{cfg.algo.name}_{cfg.task.name}_seed{cfg.seed}",
-            project=cfg.logger.project,
-            wandb_mode=cfg.logger.wandb_mode,
-        )
-        self.metrics = RunMetrics(self.run_dir, logger, resume=checkpoint is not None)
-        self.history: list[dict[str, Any]] = []
 
     # ----------------------------------------------------------------------------- hooks
     def register_op(self, point: str, op: Callable) -> None:
@@ -716,7 +703,12 @@ class Trainer:
             self.updates.buffers(),
         )
 
-    def _restore(self, state: dict[str, Any], checkpoint_dir: Path) -> None:
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """The inverse of :meth:`state_dict`, into a trainer built from the same config:
+        networks, optimisers, counters, hooks, the epoch's progress, the envs' snapshots and,
+        last, the random streams. The buffers are the checkpoint's files, loaded first (a hook
+        may read them): :meth:`Resume.restore <s3rl_torchrl.trainer.resume.Resume.restore>`,
+        which also tells whether the run continues exactly."""
         agent = self.agent
         agent.loss.load_state_dict(state["loss"])
         for name, opt in agent.optimizers.items():
@@ -725,8 +717,6 @@ class Trainer:
             agent.lagrangian.load_state_dict(state["lagrangian"])
         if agent.contrastive is not None:
             agent.contrastive.load_state_dict(state["contrastive"])
-        self.replay_buffer.loads(checkpoint_dir / REPLAY_DIR)
-        self.updates.load(checkpoint_dir)
         self.counters = Counters(**state["counters"])
         self.best = BestFeasible(**state.get("best_feasible", {}))
         if self.delivery is not None and state.get("delivery") is not None:
@@ -735,7 +725,7 @@ class Trainer:
         hooks = state.get("hooks")
         if hooks is None:  # written before the hooks: the critic diagnostics' episodes had a key
             hooks = {"critic_diagnostics": state.get("recent_episodes")}
-        for name, hook in self._hooks.items():  # after the buffers: a hook may read them
+        for name, hook in self._hooks.items():
             hook.load_state_dict(hooks.get(name) or {})
         progress = state.get("epoch_progress")
         if progress is not None:
@@ -744,58 +734,23 @@ class Trainer:
             self._last_contrastive = dict(progress["last_contrastive"])
         if state.get("test_env") is not None:
             restore_env(self.test_env, state["test_env"])
+        # Put into the envs when the collector is built (_start_collector); None: the training
+        # episodes restart (Resume.restore says why).
         self._resume_collector = state.get("collector")
-        exact = self._resume_collector is not None or (
-            self.counters.frames >= self.cfg.collector.total_frames
-        )
-        if not exact:
-            reason = exact_restore_unsupported(self.train_env) or (
-                "the checkpoint was written before checkpoints kept the envs' state"
-            )
-            self.inexact_resume = reason
-            # The n-step windows held back from the last batch would run into the restarted
-            # episodes' first steps: they end where their episodes were cut.
-            self.updates.end_episodes()
-            print(
-                f"Resuming {self.run_dir} inexactly: {reason}; every training episode restarts "
-                "here, so the rest of the run differs from an uninterrupted one."
-            )
         restore_rng_state(state["rng"])
 
 
-def check_total_frames(cfg: TrainConfig, frames: int) -> None:
-    """A resumed run may get a larger ``collector.total_frames`` (extending a finished run),
-    never one below the frames it already collected."""
-    if cfg.collector.total_frames < frames:
-        raise CheckpointError(
-            f"Invalid value {cfg.collector.total_frames!r} for 'collector.total_frames': the "
-            f"checkpoint has already collected {frames} frames; resume with "
-            f"collector.total_frames >= {frames} (larger extends the run)."
-        )
-
-
-def record_resume(
-    run_dir: Path, saved: dict, current: dict, counters: Counters, inexact: str | None = None
-) -> None:
-    """What a resume changed, kept in the run's ``config.json``: it then holds the config the
-    run continues with, and under ``resumes`` every resume's frame count and the values it
-    changed (``[before, after]``), e.g. ``compile`` or an extended ``collector.total_frames``.
-    An extended run's earlier ``final_eval.json`` is kept as ``final_eval_<frames>.json``."""
-    path = run_dir / CONFIG_FILE
-    history = json.loads(path.read_text()).get("resumes", []) if path.is_file() else []
-    changed = {
-        key: [before, after]
-        for key, (before, after) in config_changes(saved, current).items()
-        if key != "resume"
-    }
-    entry: dict[str, Any] = {"frames": counters.frames, "changed": changed, "exact": inexact is None}
-    if inexact is not None:
-        entry["inexact_reason"] = inexact
-    history.append(entry)
-    path.write_text(json.dumps({**current, "resumes": history}, indent=2))
-    final = run_dir / FINAL_EVAL_FILE
-    if final.is_file() and current["collector"]["total_frames"] > counters.frames:
-        final.rename(run_dir / f"final_eval_{counters.frames}.json")
+def _take_run_dir(run_dir: Path, new: bool) -> RunLock:
+    """Make ``run_dir`` the run's (a ``new`` run's must not hold one) and lock it: no second
+    process may train into it until the loop ends (run_lock.py)."""
+    # A read-only run directory: one clean line before anything is built or trained.
+    check_writable(run_dir)
+    check_writable(run_dir / "checkpoints")
+    if new:
+        # Before anything is built or written, so that run's files stay as they are.
+        ensure_new_run_dir(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    return RunLock.take(run_dir)
 
 
 def train(

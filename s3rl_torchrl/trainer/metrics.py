@@ -23,6 +23,10 @@ from torchrl.record.loggers.csv import CSVLogger
 METRICS_FILE = "metrics.csv"
 STEP_COLUMN = "frames"
 LOG_DIR = "logs"  # the torchrl logger's files, inside the run directory
+# The run's other files at its top level: the config it runs with (and its resumes), and the
+# final evaluation.
+CONFIG_FILE = "config.json"
+FINAL_EVAL_FILE = "final_eval.json"
 
 
 def make_torchrl_logger(

@@ -30,9 +30,10 @@ from tensordict import TensorDictBase
 from tqdm.auto import tqdm
 
 from s3rl_torchrl.algorithms.stacked import StackedSACLag, draw_noise
-from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, CheckpointError, check_writable
+from s3rl_torchrl.trainer.checkpoint import GROUP_FILE, check_writable
 from s3rl_torchrl.trainer.config import TrainConfig, to_container
 from s3rl_torchrl.trainer.loop import StopRequest, Trainer, TrainResult, compile_loss
+from s3rl_torchrl.trainer.resume import check_group
 
 
 def seed_dir(group_dir: str | Path, seed: int) -> Path:
@@ -59,8 +60,8 @@ class SeedRun(Trainer):
         state["optimizers"] = self.group.optimizer_state(self.index)
         return state
 
-    def _restore(self, state: dict[str, Any], checkpoint_dir: Path) -> None:
-        super()._restore(state, checkpoint_dir)
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
         self.restored_optimizers = state["optimizers"]  # stacked by the group once it exists
 
 
@@ -119,26 +120,15 @@ class MultiSeedTrainer:
 
     def _check_group_dir(self) -> None:
         check_writable(self.run_dir)  # one clean line, before anything is built
-        group_file = self.run_dir / GROUP_FILE
-        if not self.cfg.resume:
-            if group_file.exists():
-                raise FileExistsError(
-                    f"{self.run_dir} already holds a multi-seed run ({GROUP_FILE}); continue it "
-                    f"with resume={self.run_dir} or train into a new directory."
-                )
-            self.run_dir.mkdir(parents=True, exist_ok=True)
+        if self.cfg.resume:
+            check_group(self.run_dir, self.cfg.seeds)
             return
-        if not group_file.is_file():
-            raise CheckpointError(
-                f"{self.run_dir} is not a multi-seed run directory (no {GROUP_FILE}); a "
-                "single-seed run resumes without `seeds`."
+        if (self.run_dir / GROUP_FILE).exists():
+            raise FileExistsError(
+                f"{self.run_dir} already holds a multi-seed run ({GROUP_FILE}); continue it "
+                f"with resume={self.run_dir} or train into a new directory."
             )
-        saved = json.loads(group_file.read_text())["seeds"]
-        if list(saved) != list(self.cfg.seeds):
-            raise CheckpointError(
-                f"The multi-seed run in {self.run_dir} has seeds={saved}; resume it with the "
-                f"same seeds (got seeds={list(self.cfg.seeds)})."
-            )
+        self.run_dir.mkdir(parents=True, exist_ok=True)
 
     @contextlib.contextmanager
     def _seed_rng(self, index: int) -> Iterator[None]:

@@ -381,3 +381,87 @@ def test_a_checkpoint_without_the_record_drops_rows_past_its_frames_at_any_depth
     cut_back_to_checkpoint(tmp_path, None, frames=200)
     assert nested.read_bytes() == b"100,0.5\n200,0.7\n"
     assert (tmp_path / "metrics.csv").read_text().splitlines() == ["epoch,frames", "1,200"]
+
+
+# ------------------------------------------------------------------------------ trainer/resume.py
+# What a resume reads, checks and restores (docs/architecture.md, "Resume"), tested directly.
+def test_check_compatible_names_every_changed_locked_key():
+    from s3rl_torchrl.trainer.checkpoint import CheckpointError
+    from s3rl_torchrl.trainer.resume import check_compatible
+
+    saved = {"seed": 3, "network": {"actor_hidden": [32, 32]}, "algo": {"n_step": 1}}
+    current = {"seed": 4, "network": {"actor_hidden": [64, 64]}, "algo": {}}
+    check_compatible(saved, saved, ["seed", "network.actor_hidden", "algo.n_step"])
+    with pytest.raises(CheckpointError) as refused:
+        check_compatible(saved, current, ["seed", "network.actor_hidden", "task.name"])
+    assert str(refused.value) == (
+        "The checkpoint does not match the current configuration:\n"
+        "  seed: checkpoint has 3, the current config has 4\n"
+        "  network.actor_hidden: checkpoint has [32, 32], the current config has [64, 64]"
+    )
+
+
+def test_holds_run_finds_a_checkpoint_or_a_group(tmp_path):
+    from s3rl_torchrl.trainer.resume import holds_run
+
+    assert not holds_run(tmp_path)
+    (tmp_path / "metrics.csv").write_text("frames\n")  # files, but no checkpoint to continue
+    assert not holds_run(tmp_path)
+    (tmp_path / "seeds.json").write_text('{"seeds": [1, 2]}')
+    assert holds_run(tmp_path)
+
+
+def test_resume_read_refuses_a_changed_locked_key_before_writing(tiny_config, tmp_path):
+    from s3rl_torchrl.trainer.checkpoint import CheckpointError
+    from s3rl_torchrl.trainer.resume import Resume
+
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    train(cfg, tmp_path)
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    cfg.resume = str(tmp_path)
+    resume = Resume.read(cfg)
+    assert resume.run_dir == tmp_path and resume.frames == 200
+    assert resume.checkpoint_dir == tmp_path / "checkpoints" / "latest"
+    other = tiny_config("algo=sac", "collector.total_frames=200", "network.actor_hidden=[64,64]")
+    other.resume = str(tmp_path)
+    with pytest.raises(CheckpointError) as refused:
+        Resume.read(other)
+    assert str(refused.value) == (
+        "The checkpoint does not match the current configuration:\n"
+        "  network.actor_hidden: checkpoint has [32, 32], the current config has [64, 64]"
+    )
+    cfg.collector.total_frames = 100
+    with pytest.raises(CheckpointError) as refused:
+        Resume.read(cfg)
+    assert str(refused.value) == (
+        "Invalid value 100 for 'collector.total_frames': the checkpoint has already collected "
+        "200 frames; resume with collector.total_frames >= 200 (larger extends the run)."
+    )
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+
+
+def test_a_restored_trainer_holds_its_checkpoints_state(tiny_config, tmp_path, monkeypatch,
+                                                        capsys):
+    # Stopped between two gradient steps of the second epoch (owed steps, the epoch's episodes
+    # and losses, held n-step frames, envs mid-episode): the trainer built with resume= holds
+    # the checkpoint's state exactly, random streams included, and says where it resumes.
+    from s3rl_torchrl.trainer.checkpoint import save_checkpoint
+
+    cfg = tiny_config("algo=sac_lag", "task=SafetyHopperVelocity-v1", "algo.n_step=3",
+                      "collector.total_frames=600")
+    with monkeypatch.context() as patch:
+        sigterm_at_step(Trainer, 37, patch)
+        part = train(cfg, tmp_path / "part")
+    assert part.status == "interrupted" and part.counters.pending_updates > 0
+    saved = tmp_path / "part" / "checkpoints" / "latest" / "state.pt"
+    cfg.resume = str(tmp_path / "part")
+    capsys.readouterr()
+    trainer = Trainer(cfg, tmp_path / "unused")
+    assert capsys.readouterr().out == (
+        f"Resuming {tmp_path / 'part'} at frame {part.counters.frames} of 600\n"
+    )
+    assert trainer.inexact_resume is None and vars(trainer.counters) == vars(part.counters)
+    save_checkpoint(tmp_path / "restored", trainer.state_dict())
+    assert same_value(checkpoint_state(tmp_path / "restored" / "state.pt"),
+                      checkpoint_state(saved))
+    trainer.run_lock.release()
