@@ -195,15 +195,11 @@ def holds_run(run_dir: str | Path) -> bool:
 def check_compatible(saved: dict[str, Any], current: dict[str, Any], keys: list[str]) -> None:
     """Fail clearly when a resumed run's config differs where the saved weights depend on it."""
 
-    def get(cfg: dict, dotted: str):  # None where the family has no such field (PPO's n_step)
-        for part in dotted.split("."):
-            cfg = cfg.get(part) if isinstance(cfg, dict) else None
-        return cfg
-
+    # _get: None where the family has no such field (PPO's n_step).
     diffs = [
-        f"{key}: checkpoint has {get(saved, key)!r}, the current config has {get(current, key)!r}"
+        f"{key}: checkpoint has {_get(saved, key)!r}, the current config has {_get(current, key)!r}"
         for key in keys
-        if get(saved, key) != get(current, key)
+        if _get(saved, key) != _get(current, key)
     ]
     if diffs:
         raise CheckpointError(
