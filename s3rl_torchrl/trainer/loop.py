@@ -359,6 +359,7 @@ class Trainer:
                 self._resume_collector, self._collector = self._collector_state(), None
                 collector.shutdown()
             progress.close()
+            self.metrics.close()
             self.stop.uninstall()
             self.run_lock.release()
 

@@ -195,6 +195,21 @@ class RunMetrics:
             flush()
         return appended_files(self.run_dir)
 
+    def close(self) -> None:
+        """End the logger's run. W&B and MLflow keep one active run per process: a run left open
+        would take the next training's scalars in the same process (a -m sweep under Hydra's
+        basic launcher runs its jobs one after another), or refuse it (MLflow)."""
+        if self.logger is None:
+            return
+        from torchrl.record.loggers.mlflow import MLFlowLogger
+
+        self.logger.close()  # torchrl's: flush, then W&B's finish or TensorBoard's close
+        if isinstance(self.logger, MLFlowLogger):
+            import mlflow
+
+            mlflow.end_run()  # torchrl's close leaves MLflow's active run open
+        self.logger = None
+
     def log_scalars(self, values: dict[str, float], step: int) -> None:
         if self.logger is None:
             return

@@ -34,6 +34,21 @@ def test_mlflow_file_store(tiny_config, tmp_path):
     assert len(step_values) == 1 and step_values[0][2] == "200"  # "timestamp value step"
 
 
+@pytest.mark.parametrize("backend", ["wandb", "mlflow"])
+def test_runs_in_one_process_each_log_their_own_run(tiny_config, tmp_path, backend):
+    # Hydra's basic launcher runs a -m sweep's jobs one after another in one process; W&B and
+    # MLflow keep one active run per process, which a finished job must end.
+    first, second = tmp_path / "first", tmp_path / "second"
+    train(tiny_config(*ARGS, f"logger={backend}"), first)
+    train(tiny_config(*ARGS, f"logger={backend}", "seed=11"), second)
+    if backend == "wandb":
+        pattern = "logs/wandb/offline-run-*/run-*.wandb"
+    else:
+        pattern = "logs/mlruns/*/*/metrics/eval/reward"
+    assert len(list(first.glob(pattern))) == 1
+    assert len(list(second.glob(pattern))) == 1
+
+
 def test_missing_backend_package_fails_before_training(compose, monkeypatch):
     real = config_module.importlib.util.find_spec
     monkeypatch.setattr(
