@@ -9,6 +9,7 @@ it. Types are checked by OmegaConf when Hydra composes the config; values (range
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Any
@@ -68,6 +69,41 @@ def check_range(
 
 def check_positive(path: str, value: float) -> None:
     check_range(path, value, 0.0, low_inclusive=False)
+
+
+@dataclass(frozen=True)
+class RemovedOption:
+    """An ``algo`` option that left the package: ``default``, the value under which it changed
+    nothing (every config now runs as that value did), and ``last_commit``, the last commit
+    that had it (to re-run what used another value)."""
+
+    default: Any
+    last_commit: str
+    what: str
+
+
+#: The ``algo`` options that left the package because no committed result chose them
+#: (research/2026-11-28-options-removed.md says what each gave). A saved config (a run's
+#: ``config.json``, a checkpoint's) may still hold them: :func:`drop_removed_options`.
+REMOVED_OPTIONS: dict[str, RemovedOption] = {
+    "cost_gamma": RemovedOption(
+        None, "6c13fe3", "the SAC family's cost critics' own discount (null: gamma)"
+    ),
+}
+
+
+def drop_removed_options(algo: dict[str, Any], path: str = "algo") -> dict[str, Any]:
+    """A saved ``algo`` without the :data:`REMOVED_OPTIONS` it holds at their default (the run
+    ran as every run does now). One at another value raises ``ConfigError``: that run used what
+    the package no longer has, so it cannot be resumed or rebuilt as it was."""
+    for name, option in REMOVED_OPTIONS.items():
+        if name in algo and algo[name] != option.default:
+            raise ConfigError(
+                f"'{path}.{name}' is {json.dumps(algo[name])}, but {name} ({option.what}) has "
+                f"been removed: only its default, {json.dumps(option.default)}, loads. Use the "
+                f"package at commit {option.last_commit}, the last that had it, for this run."
+            )
+    return {key: value for key, value in algo.items() if key not in REMOVED_OPTIONS}
 
 
 @dataclass

@@ -29,7 +29,6 @@ from s3rl_torchrl.algorithms.config import (
     OffPolicyConfig,
     check_choice,
     check_positive,
-    check_range,
 )
 from s3rl_torchrl.algorithms.schedule import OffPolicySchedule
 from s3rl_torchrl.modules import build_cost_qvalue_network, build_qvalue_network
@@ -63,8 +62,6 @@ class SACConfig(OffPolicyConfig):
     # How the pair is read in the cost targets and the actor loss: min (FSRL), max or mean.
     cost_critic_read: str = "min"
     cost_nonnegative: bool = False  # clamp the cost value at 0 in its target and actor read
-    # The cost critics' own discount (and the n-step cost sums'); None: gamma (FSRL).
-    cost_gamma: float | None = None
     # With rescaling: divide the entropy term by 1 + lambda too (FSRL); false keeps alpha's
     # term out of the rescaling, so auto alpha does not grow with lambda.
     entropy_rescaling: bool = True
@@ -77,8 +74,6 @@ class SACConfig(OffPolicyConfig):
         for name in ("alpha_lr", "alpha_init"):
             check_positive(f"{path}.{name}", getattr(self, name))
         check_choice(f"{path}.cost_critic_read", self.cost_critic_read, COST_CRITIC_READS)
-        if self.cost_gamma is not None:
-            check_range(f"{path}.cost_gamma", self.cost_gamma, 0.0, 1.0)
         check_choice(f"{path}.update_order", self.update_order, UPDATE_ORDERS)
 
 
@@ -265,7 +260,6 @@ def build_sac_agent(algo: SACConfig, nets: Networks, compile_fn: CompileFn | Non
         entropy_rescaling=algo.entropy_rescaling,
         cost_critic_read=algo.cost_critic_read,
         cost_nonnegative=algo.cost_nonnegative,
-        cost_gamma=algo.cost_gamma,
         lagrangian_init=algo.lagrangian_init if constrained else 0.0,
     )
     loss.make_value_estimator(gamma=algo.gamma)

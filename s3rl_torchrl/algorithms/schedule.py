@@ -173,13 +173,7 @@ class OffPolicySchedule(UpdateSchedule):
         # the last n frames of each copy until the next batch (paper: n = 2).
         algo = self.algo
         nstep = (
-            make_nstep_transform(
-                algo.n_step,
-                algo.gamma,
-                keep_keys=keep_at_t,
-                # The SAC family's cost critics may discount with a gamma of their own.
-                cost_gamma=getattr(algo, "cost_gamma", None),
-            )
+            make_nstep_transform(algo.n_step, algo.gamma, keep_keys=keep_at_t)
             if algo.n_step > 1
             else None
         )

@@ -130,17 +130,15 @@ def critic_calibration(
     episodes: list[TensorDictBase],
     gamma: float,
     max_rows: int = 2000,
-    cost_gamma: float | None = None,
 ) -> dict[str, float]:
     """The critics at the steps of ``episodes`` against the steps' discounted returns.
 
     ``loss`` is a :class:`~s3rl_torchrl.objectives.SACLagLoss` (its current critics: the reward
-    pair through its min, the cost pair as the actor loss reads it); the costs are discounted
-    with ``cost_gamma`` when the cost critics have their own (``None``: ``gamma``). Rows are every
-    ``ceil(rows / max_rows)``-th step. Returns, for ``reward`` and ``cost`` (summed over costs):
-    ``critic/<signal>_q`` (mean prediction), ``critic/<signal>_return`` (mean return),
-    ``critic/<signal>_error`` (mean prediction minus return) and ``critic/<signal>_rmse``; NaN
-    without a finished episode. The reward critic is a soft critic: its value includes the
+    pair through its min, the cost pair as the actor loss reads it), both signals discounted
+    with ``gamma``. Rows are every ``ceil(rows / max_rows)``-th step. Returns, for ``reward``
+    and ``cost`` (summed over costs): ``critic/<signal>_q`` (mean prediction),
+    ``critic/<signal>_return`` (mean return), ``critic/<signal>_error`` (mean prediction minus
+    return) and ``critic/<signal>_rmse``; NaN without a finished episode. The reward critic is a soft critic: its value includes the
     entropy bonus, which its error therefore includes too.
     """
     names = ("q", "return", "error", "rmse")
@@ -152,8 +150,7 @@ def critic_calibration(
         terminated = bool(episode.get(("next", "terminated"))[-1].any())
         reward_returns.append(discounted_returns(episode.get(("next", "reward")), gamma, terminated))
         cost = episode.get(("next", "cost")).sum(-1)
-        cost_discount = gamma if cost_gamma is None else cost_gamma
-        cost_returns.append(discounted_returns(cost, cost_discount, terminated))
+        cost_returns.append(discounted_returns(cost, gamma, terminated))
         rows.append(episode.select("observation", "action"))
     data = torch.cat(rows, 0)
     targets = {"reward": torch.cat(reward_returns), "cost": torch.cat(cost_returns)}

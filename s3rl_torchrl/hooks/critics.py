@@ -60,12 +60,7 @@ class CriticDiagnostics(TrainerHook):
         return batch
 
     def measure(self, row: dict[str, Any]) -> dict[str, float]:
-        out = critic_calibration(
-            self.loss,
-            list(self.recent_episodes.episodes),
-            self.gamma,
-            cost_gamma=self.loss.cost_gamma,  # the cost critics' own discount, if any
-        )
+        out = critic_calibration(self.loss, list(self.recent_episodes.episodes), self.gamma)
         storage = self.replay_buffer.storage
         if len(storage) == 0:
             return {**out, "grad/entropy": math.nan, "grad/reward": math.nan, "grad/cost": math.nan}

@@ -13,8 +13,7 @@ reward critic ``Q_0j`` and one double cost critic ``Q_ij`` per cost ``i``:
 is one sample shared by all targets, ``a`` one reparameterised sample shared by the actor
 loss's terms. These are FSRL's formulas, the defaults; ``cost_critic_read``,
 ``cost_nonnegative``, ``entropy_in_cost_target`` and ``entropy_rescaling`` make the cost critic
-sound under a large multiplier, and ``cost_gamma`` gives it a discount of its own
-(docs/objectives.md, "Sound critics").
+sound under a large multiplier (docs/objectives.md, "Sound critics").
 
 As torchrl's ``TQCLoss`` does, it changes ``SACLoss`` through the critic loss
 (:meth:`qvalue_v2_loss`, with the cost critics), the targets (:meth:`compute_targets`) and the
@@ -73,8 +72,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         entropy_in_cost_target, rescaling, entropy_rescaling: FSRL's (on), see the formulas.
         cost_critic_read: ``"min"`` (FSRL), ``"max"`` or ``"mean"`` of a cost pair, in the
             targets and the actor loss. cost_nonnegative: clamp that read at 0 (FSRL: off).
-        cost_gamma: the cost critics' discount (``None``, FSRL: the value estimator's gamma);
-            the n-step cost sums must use it too (``make_nstep_transform(cost_gamma=...)``).
         lagrangian_init: a number or ``m`` values, >= 0.
         sac_kwargs: ``SACLoss``'s other arguments (``fixed_alpha``, ``action_spec``, ...).
 
@@ -119,7 +116,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         entropy_rescaling: bool = True,
         cost_critic_read: Literal["min", "max", "mean"] = "min",
         cost_nonnegative: bool = False,
-        cost_gamma: float | None = None,
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
         **sac_kwargs,
     ) -> None:
@@ -144,8 +140,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             },
             alpha_init=alpha_init,
         )
-        if cost_gamma is not None and not 0.0 <= cost_gamma <= 1.0:
-            raise ValueError(f"cost_gamma must be in [0, 1] or None, got {cost_gamma!r}.")
         super().__init__(
             actor_network, qvalue_network, None, num_qvalue_nets=num_qvalue_nets,
             loss_function=loss_function, alpha_init=alpha_init, delay_actor=False,
@@ -157,7 +151,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         self.entropy_rescaling = bool(entropy_rescaling)
         self.cost_critic_read = cost_critic_read
         self.cost_nonnegative = bool(cost_nonnegative)
-        self.cost_gamma = None if cost_gamma is None else float(cost_gamma)
         self._init_lagrangian(lagrangian_init, device=self.log_alpha.device)
         if num_costs > 0:
             self.convert_to_functional(
@@ -284,10 +277,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
                 next_cost_value = self.read_cost(q_cost).movedim(0, -1)
                 if self.cost_nonnegative:
                     next_cost_value = next_cost_value.clamp_min(0.0)
-                if self.cost_gamma is not None:  # the cost columns with their own discount
-                    target = self._td0(tensordict, rewards, next_value)[..., 0]
-                    cost = cost.to(rewards.dtype)
-                    return target, self._cost_td0(tensordict, cost, next_cost_value)
                 next_value = torch.cat([next_value, next_cost_value], -1)
                 rewards = torch.cat([rewards, cost.to(rewards.dtype)], -1)
             target = self._td0(tensordict, rewards, next_value)
@@ -312,20 +301,6 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             entries[est_keys.steps_to_next_obs] = steps.reshape(*batch, 1).expand(shape)
         td = TensorDict(entries, batch_size=batch)
         return self.value_estimator.value_estimate(td, next_value=next_value)
-
-    def _cost_td0(self, tensordict: TensorDictBase, cost: Tensor, next_value: Tensor) -> Tensor:
-        """``y_i = C_i + cost_gamma ** k (1 - terminated) V'_i`` (``[*B, m]``), k the steps to
-        the bootstrap observation, as torchrl's TD(0) does with its own gamma."""
-        keys = self.tensor_keys
-        terminated = tensordict.get(_next(keys.terminated), None)
-        if terminated is None:
-            terminated = tensordict.get(_next(keys.done))
-        alive = (~terminated.reshape(*tensordict.batch_size, 1)).to(cost.dtype)
-        steps = tensordict.get(keys.steps_to_next_obs, None)
-        discount = self.cost_gamma
-        if steps is not None:
-            discount = discount ** steps.reshape(*tensordict.batch_size, 1).to(cost.dtype)
-        return cost + discount * alive * next_value
 
     # ------------------------------------------------------------------ losses
     def qvalue_v2_loss(self, tensordict: TensorDictBase) -> tuple[Tensor, dict[str, Tensor]]:

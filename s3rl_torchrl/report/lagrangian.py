@@ -44,6 +44,7 @@ import textwrap
 from collections import defaultdict
 from pathlib import Path
 
+from s3rl_torchrl.algorithms.config import REMOVED_OPTIONS
 from s3rl_torchrl.report.records import write_json
 
 __all__ = [
@@ -170,8 +171,9 @@ _FSRL_CRITICS = {"cost_critic_read": "min", "cost_nonnegative": False, "cost_ent
 
 def _critic_setting(algo: dict) -> str:
     """What else a SAC-family selection varies, when it differs from FSRL's and the paper's:
-    the cost critics (``critic=sound`` is ``sound(read=max)``), their own discount, the
-    gradient steps per frame (the paper's 0.2). Empty for the paper's runs with FSRL's critics."""
+    the cost critics (``critic=sound`` is ``sound(read=max)``), an option that has since left
+    the package (``REMOVED_OPTIONS``) at another value than its default, the gradient steps
+    per frame (the paper's 0.2). Empty for the paper's runs with FSRL's critics."""
     label = ""
     if "cost_critic_read" in algo:
         critics = {key: algo.get(key, default) for key, default in _FSRL_CRITICS.items()}
@@ -179,8 +181,9 @@ def _critic_setting(algo: dict) -> str:
             sound = critics["cost_nonnegative"] and not critics["cost_entropy"]
             sound = sound and not critics["entropy_rescaling"]
             label += f" {'sound' if sound else 'critic'}(read={critics['cost_critic_read']})"
-    if algo.get("cost_gamma") is not None:
-        label += f" cost_gamma={algo['cost_gamma']}"
+    for name, option in REMOVED_OPTIONS.items():  # the runs made before it left
+        if algo.get(name, option.default) != option.default:
+            label += f" {name}={algo[name]}"
     if "cost_critic_read" in algo and algo.get("update_per_step", 0.2) != 0.2:
         label += f" ups={algo['update_per_step']}"
     return label

@@ -10,7 +10,8 @@ field's name and what it accepts.
 
 A config saved by an earlier version (a run's ``config.json``, a checkpoint's config) loads with
 :func:`saved_config_node`: its ``algo`` held every family's fields then, and the fields its
-family does not have are dropped (see there).
+family does not have are dropped; an option that has left the package is dropped at its default
+and refused at any other value (see there).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from s3rl_torchrl.algorithms.config import (
     check_choice,
     check_finite,
     check_range,
+    drop_removed_options,
     fail,
 )
 from s3rl_torchrl.algorithms.registry import ALGORITHMS, family_of
@@ -514,10 +516,13 @@ def saved_config_node(saved: dict) -> DictConfig:
     - a config without ``diagnostics`` (before the trainer hooks) ran the linear probes at
       every epoch, so they stay on: the resumed run logs the columns it logged;
     - a ``contrastive_cfg`` without ``phase_at`` (before 2026-11-28) ran each contrastive phase
-      at the end of its interval, so it keeps ``end``: a resume keeps the run's schedule.
+      at the end of its interval, so it keeps ``end``: a resume keeps the run's schedule;
+    - an option that has left the package (``algorithms.config.REMOVED_OPTIONS``) is dropped
+      at its default, and refused (``ConfigError``, naming the last commit that had it) at
+      any other value (``drop_removed_options``).
     """
     saved = dict(saved)
-    algo = dict(saved.get("algo") or {})
+    algo = drop_removed_options(dict(saved.get("algo") or {}))
     family = family_of(algo.get("name", ""))
     kept = {f.name for f in fields(family.config)}
     saved["algo"] = {key: value for key, value in algo.items() if key in kept}

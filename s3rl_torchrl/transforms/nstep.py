@@ -30,7 +30,7 @@ A truncated window (time limit) therefore bootstraps from the real last observat
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import torch
 from tensordict import TensorDictBase
@@ -67,7 +67,6 @@ def nstep_transition(
     done_key: NestedKey = "done",
     keep_keys: Sequence[NestedKey] = ("safe",),
     orig_suffix: str = "_orig",
-    key_gammas: Mapping[NestedKey, float] | None = None,
 ) -> TensorDictBase:
     """Turn one-step transitions ``[*batch, T]`` (time last) into n-step transitions.
 
@@ -85,14 +84,8 @@ def nstep_transition(
         done_key: ``next`` entry that ends an episode (``done`` = terminated or truncated).
         keep_keys: ``next`` entries that describe step ``t`` itself and stay there.
         orig_suffix: suffix of the entries keeping the one-step reward values.
-        key_gammas: a discount of its own for some reward keys (e.g. ``{"cost": 0.9}`` for a
-            cost critic with its own gamma, ``SACLagLoss(cost_gamma=...)``); ``gamma`` for the
-            others.
     """
     _check_n_gamma(n_steps, gamma)
-    key_gammas = dict(key_gammas or {})
-    for value in key_gammas.values():
-        _check_n_gamma(n_steps, value)
     if tensordict.ndim < 1:
         raise ValueError("nstep_transition needs a time dimension (the last batch dimension).")
     next_td = tensordict.get("next")
@@ -132,8 +125,7 @@ def nstep_transition(
         for key, value in rewards.items():
             shifted = value.index_select(time_dim, idx)
             mask = valid.reshape(valid.shape + (1,) * (value.ndim - valid.ndim))
-            discount = key_gammas.get(key, gamma)
-            sums[key] = sums[key] + (discount**k) * torch.where(mask, shifted, 0)
+            sums[key] = sums[key] + (gamma**k) * torch.where(mask, shifted, 0)
         last = torch.where(valid, k, last)
         # The window stops after the step that ends the episode (terminated or truncated).
         alive = valid & ~done.index_select(time_dim, idx)
@@ -176,7 +168,6 @@ class NStepTransform(MultiStepTransform):
         keep_keys: Sequence[NestedKey] = ("safe",),
         orig_suffix: str = "_orig",
         flatten: bool = True,
-        key_gammas: Mapping[NestedKey, float] | None = None,
     ):
         _check_n_gamma(n_steps, gamma)
         super().__init__(
@@ -189,7 +180,6 @@ class NStepTransform(MultiStepTransform):
         self.keep_keys = tuple(keep_keys)
         self.orig_suffix = orig_suffix
         self.flatten = bool(flatten)
-        self.key_gammas = dict(key_gammas or {})
 
     def _inv_call(self, tensordict: TensorDictBase) -> TensorDictBase | None:
         if not self._validated:
@@ -211,7 +201,6 @@ class NStepTransform(MultiStepTransform):
             done_key=self.done_key,
             keep_keys=self.keep_keys,
             orig_suffix=self.orig_suffix,
-            key_gammas=self.key_gammas,
         )
         out = out[..., : -self.n_steps]
         return out.reshape(-1) if self.flatten else out
@@ -274,7 +263,6 @@ def make_nstep_transform(
     reward_key: NestedKey = "reward",
     keep_keys: Sequence[NestedKey] = ("safe",),
     flatten: bool = True,
-    cost_gamma: float | None = None,
 ) -> NStepTransform:
     """The n-step replay-buffer transform :class:`~s3rl_torchrl.objectives.SACLagLoss` expects.
 
@@ -283,7 +271,6 @@ def make_nstep_transform(
     of the window, and writes ``steps_to_next_obs``. Use it as ``ReplayBuffer(
     storage=LazyTensorStorage(size), transform=make_nstep_transform(2, 0.99))`` and ``extend``
     with a collector's batches (``[num_envs, time]``, unflattened: the transform flattens).
-    ``cost_gamma`` sums the cost with a discount of its own (the loss's ``cost_gamma``).
     """
     return NStepTransform(
         n_steps,
@@ -291,5 +278,4 @@ def make_nstep_transform(
         reward_keys=(reward_key, cost_key),
         keep_keys=keep_keys,
         flatten=flatten,
-        key_gammas=None if cost_gamma is None else {cost_key: cost_gamma},
     )

@@ -223,6 +223,8 @@ def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
     config["algo"] |= {"cost_critic_read": "max", "cost_nonnegative": True,
                        "cost_entropy": False, "entropy_rescaling": False}
     assert ld.setting_name(config) == f"{base} sound(read=max) batch=1000"
+    # A run made before cost_gamma left the package (algorithms.config.REMOVED_OPTIONS) with
+    # another value than its default keeps it in its setting, apart from the others.
     config["algo"] |= {"cost_critic_read": "mean", "cost_gamma": 0.9, "update_per_step": 0.5}
     expected = f"{base} sound(read=mean) cost_gamma=0.9 ups=0.5 batch=1000"
     assert ld.setting_name(config) == expected

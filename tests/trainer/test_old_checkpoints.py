@@ -22,14 +22,16 @@ from pathlib import Path
 
 import pytest
 
-from s3rl_torchrl.algorithms import DDPGConfig, PPOConfig, SACConfig
+from s3rl_torchrl.algorithms import ConfigError, DDPGConfig, PPOConfig, SACConfig
+from s3rl_torchrl.algorithms.config import REMOVED_OPTIONS
 from s3rl_torchrl.trainer import train
-from s3rl_torchrl.trainer.config import saved_config_node, saved_train_config
+from s3rl_torchrl.trainer.config import saved_config_node, saved_train_config, to_container
 from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.resume import resume_config, saved_config
 from tests.trainer.test_resume import final, rows
 
-FIXTURES = Path(__file__).resolve().parents[1] / "data" / "old_checkpoints"
+REPO = Path(__file__).resolve().parents[2]
+FIXTURES = REPO / "tests" / "data" / "old_checkpoints"
 CASES = {"s3rl": SACConfig, "ddpg_lag": DDPGConfig, "ppo_lag": PPOConfig}
 # Relative tolerance for the fixtures' numbers: 8x the largest rounding difference measured
 # between two machines (module docstring).
@@ -109,8 +111,6 @@ def test_an_old_config_loads_with_its_familys_fields(case):
 
 
 def test_a_config_of_this_version_loads_unchanged(tiny_config):
-    from s3rl_torchrl.trainer.config import to_container
-
     for algo in CASES:
         cfg = tiny_config(f"algo={algo}")
         assert saved_train_config(to_container(cfg)) == cfg
@@ -122,6 +122,40 @@ def test_a_config_of_this_version_loads_unchanged(tiny_config):
     assert saved_train_config(saved).algo.contrastive_cfg.phase_at == "start"
     del saved["algo"]["contrastive_cfg"]["phase_at"]
     assert saved_train_config(saved).algo.contrastive_cfg.phase_at == "end"
+
+
+def test_a_removed_option_loads_at_its_default_and_is_refused_at_any_other(tiny_config):
+    # algo.cost_gamma (the cost critics' own discount) left after commit 6c13fe3; every run
+    # saved before then holds it, null unless set.
+    cfg = tiny_config("algo=sac_lag")
+    saved = to_container(cfg)
+    assert "cost_gamma" in REMOVED_OPTIONS and "cost_gamma" not in saved["algo"]
+    saved["algo"]["cost_gamma"] = None
+    assert saved_train_config(saved) == cfg  # at its default: the run ran as runs do now
+    saved["algo"]["cost_gamma"] = 0.9  # a setting this version cannot run
+    message = r"'algo\.cost_gamma' is 0\.9, but cost_gamma .* removed.* commit 6c13fe3"
+    with pytest.raises(ConfigError, match=message):
+        saved_config_node(saved)
+
+
+def test_the_exported_runs_configs_load():
+    # The exported config.json files that hold a removed option (results/, research/results/),
+    # one per result tree and algorithm: the reports read them as they are; a resume or an
+    # evaluation of their runs reads the config their checkpoints hold, the same but for
+    # config.json's history of resumes, through saved_config_node.
+    configs = {}
+    for tree in ("results", "research/results"):
+        for path in sorted((REPO / tree).rglob("config.json")):
+            saved = json.loads(path.read_text())
+            if set(REMOVED_OPTIONS) & set(saved.get("algo", {})):
+                group = (path.relative_to(REPO).parts[: tree.count("/") + 2], saved["algo"]["name"])
+                configs.setdefault(group, saved)
+    if not configs:
+        pytest.skip("no exported run holds a removed option here (not a repository checkout)")
+    for group, saved in configs.items():
+        saved.pop("resumes", None)
+        cfg = saved_train_config(saved)
+        assert cfg.algo.name == saved["algo"]["name"] and cfg.seed == saved["seed"], group
 
 
 def test_s3rl_eval_loads_an_old_checkpoint(tmp_path):
