@@ -15,7 +15,7 @@ from s3rl_torchrl.envs.registry import (
     get_task,
     task_names,
 )
-from s3rl_torchrl.envs.spec import SafeSettings, TaskSpec
+from s3rl_torchrl.envs.spec import TaskSpec
 from s3rl_torchrl.envs.state import env_snapshot, exact_restore_unsupported, restore_env
 from s3rl_torchrl.envs.velocity import register_velocity_tasks, velocity_cost
 
@@ -35,7 +35,6 @@ __all__ = [
     "VELOCITY_SPECS",
     "VELOCITY_TASKS",
     "RegisteredTask",
-    "SafeSettings",
     "TaskSpec",
     "env_snapshot",
     "exact_restore_unsupported",

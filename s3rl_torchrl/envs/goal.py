@@ -47,7 +47,7 @@ from s3rl_torchrl.envs.layout import (
     check_keys,
     layout_from_options,
 )
-from s3rl_torchrl.envs.spec import SafeSettings, TaskSpec
+from s3rl_torchrl.envs.spec import TaskSpec
 from s3rl_torchrl.envs.state import generator_state, set_generator_state
 
 # bases/base_task.py: BaseTask.num_steps = 1000; safety_gymnasium/__init__.py registers every Goal
@@ -56,16 +56,6 @@ GOAL_MAX_EPISODE_STEPS = 1000
 # The paper's Table 3 cost limit, which it uses for every task (Table 1 reports episode costs of
 # ~94-103 on this task for both algorithms, far above it).
 GOAL_COST_LIMIT = 10.0
-# The limit OmniSafe benchmarks the Goal tasks at (its off-policy and on-policy tables, 25 per
-# 1000-step episode); experiment=safe trains at it (TaskSpec.safe_cost_limit).
-GOAL_BENCHMARK_COST_LIMIT = 25.0
-# experiment=safe on the Goal task (research/2026-11-25-critic-selection.md;
-# chosen on seeds 1 and 2): lambda frozen for the first 100k frames, so that the goal is learned
-# (unconstrained SAC learns it in ~40k frames), then Adam at OmniSafe's per-frame rate on this
-# task (5e-7 per env step at one update per step = 3e-6 per update at 0.2 updates per frame).
-# At the preset's 3e-4 (or 3e-5, or 1e-5) lambda passes ~0.2-0.3 within 100-200k frames, where
-# the cost term's actor gradient outweighs the reward's and the agent stops moving.
-GOAL_SAFE_SETTINGS = SafeSettings(lagrangian_lr=3e-6, lagrangian_warmup_frames=100_000)
 
 # -- placement: where reset puts things ----------------------------------------------------
 # goal_level1.py: placements_conf.extents = [-1.5, -1.5, 1.5, 1.5] (min x, min y, max x, max y).
@@ -611,8 +601,6 @@ GOAL_TASKS: tuple[TaskSpec, ...] = tuple(
         source=_SOURCE,
         max_episode_steps=GOAL_MAX_EPISODE_STEPS,
         cost_limit=GOAL_COST_LIMIT,
-        benchmark_cost_limit=GOAL_BENCHMARK_COST_LIMIT,
-        safe=GOAL_SAFE_SETTINGS,
         obs_dim=12 + LIDAR_NUM_BINS * len(LIDAR_OBJECTS),
         act_dim=2,
         cost_rule=_COST_RULE,

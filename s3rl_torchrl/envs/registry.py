@@ -24,7 +24,7 @@ from typing import Literal
 from s3rl_torchrl.envs.bullet import BULLET_TASKS
 from s3rl_torchrl.envs.circle import CIRCLE_TASKS
 from s3rl_torchrl.envs.goal import GOAL_TASKS
-from s3rl_torchrl.envs.spec import SafeSettings, TaskSpec
+from s3rl_torchrl.envs.spec import TaskSpec
 
 # Each family's module defines its TaskSpec tuple (and registers its ids with Gymnasium in
 # s3rl_torchrl/envs/__init__.py); a new family adds its import here and its tuple in TASKS.
@@ -47,7 +47,6 @@ class VelocityTask:
         act_dim: action size.
         v5_obs_dim: observation size of the Gymnasium v5 env (the ``...MujocoV5`` variant).
         terminates: whether the robot can fall and end an episode early.
-        safe: the task's own values of ``experiment=safe`` (:class:`SafeSettings`).
     """
 
     robot: str
@@ -58,7 +57,6 @@ class VelocityTask:
     act_dim: int
     v5_obs_dim: int
     terminates: bool
-    safe: SafeSettings = SafeSettings()
 
     @property
     def env_id(self) -> str:
@@ -79,20 +77,13 @@ class VelocityTask:
         return f"{self.robot}-{mujoco_version}"
 
 
-# experiment=safe on Hopper (docs/results.md, "Selection round 5"; chosen on seeds 1 and 2 of
-# SAC-Lag at 1M frames): the sound critics' cost pair read through its mean. Read through its
-# max it over-reads Hopper's cost 1.7-2.1x, lambda stays at 2-4, and the hopper settles on a gait
-# that falls (the evidence's S3RL seeds 10 and 20, the selection's seed 2).
-HOPPER_SAFE_SETTINGS = SafeSettings(cost_critic_read="mean")
-
 VELOCITY_TASKS: tuple[VelocityTask, ...] = (
     VelocityTask("Ant", "v0", 2.5745, "xy", 27, 8, 105, terminates=True),
     VelocityTask("Ant", "v1", 2.6222, "xy", 27, 8, 105, terminates=True),
     VelocityTask("HalfCheetah", "v0", 2.8795, "x", 17, 6, 17, terminates=False),
     VelocityTask("HalfCheetah", "v1", 3.2096, "x", 17, 6, 17, terminates=False),
     VelocityTask("Hopper", "v0", 0.37315, "x", 11, 3, 11, terminates=True),
-    VelocityTask("Hopper", "v1", 0.7402, "x", 11, 3, 11, terminates=True,
-                 safe=HOPPER_SAFE_SETTINGS),
+    VelocityTask("Hopper", "v1", 0.7402, "x", 11, 3, 11, terminates=True),
     VelocityTask("Humanoid", "v0", 2.3475, "xy", 376, 17, 348, terminates=True),
     VelocityTask("Humanoid", "v1", 1.4149, "xy", 376, 17, 348, terminates=True),
     VelocityTask("Swimmer", "v0", 0.04845, "xy", 8, 2, 8, terminates=False),
@@ -144,8 +135,6 @@ def _velocity_spec(registered: RegisteredTask) -> TaskSpec:
         margin_rule=f"{task.threshold} - {velocity}",
         alias_of=task.env_id if registered.env_id == task.gymnasium_api_id else None,
         variant_of=task.env_id if v5 else None,
-        # The v5 robot is a different task: the settings were chosen on the v4 one.
-        safe=SafeSettings() if v5 else task.safe,
     )
 
 

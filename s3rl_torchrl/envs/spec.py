@@ -7,7 +7,6 @@ module (``velocity``, ``bullet``, ``circle``, ``goal``) can build its entries wi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 #: The task families; each has its own module and Gymnasium registration.
 FAMILIES: tuple[str, ...] = ("velocity", "bullet", "circle", "goal")
@@ -22,29 +21,10 @@ EXTRA_INSTALL: dict[str, str] = {
 
 
 @dataclass(frozen=True)
-class SafeSettings:
-    """What the recommended preset (``experiment=safe``) sets for one task where its defaults do
-    not fit, as OmniSafe keeps per-environment overrides of its algorithms' configs. ``None``
-    keeps the preset's value (configs/experiment/safe.yaml); the reasons are in
-    docs/results.md ("Safe agents beyond the velocity tasks").
-
-    Attributes:
-        lagrangian_lr: the multiplier's Adam rate per gradient step (``algo.lagrangian_lr``).
-        lagrangian_warmup_frames: frames before lambda first moves
-            (``algo.lagrangian_warmup_frames``).
-        cost_critic_read: how the SAC family's sound critics read their cost pair
-            (``algo.cost_critic_read`` of ``critic=sound``, whose default is ``"max"``):
-            ``"max"``, ``"mean"`` or ``"min"``. ``critic=fsrl`` keeps FSRL's ``"min"``.
-    """
-
-    lagrangian_lr: float | None = None
-    lagrangian_warmup_frames: int | None = None
-    cost_critic_read: Literal["min", "max", "mean"] | None = None
-
-
-@dataclass(frozen=True)
 class TaskSpec:
-    """One task id of the registry: the facts the trainer, the docs and the tests read.
+    """One task id of the registry: the facts the trainer, the docs and the tests read. What a
+    preset tunes for a task is the preset's, not the task's (``experiment=safe``'s own values
+    for some tasks: ``s3rl_torchrl/trainer/presets.py``).
 
     Attributes:
         env_id: the Gymnasium id, e.g. ``"SafetyBallRun-v0"`` (also the ``task=`` value).
@@ -52,10 +32,6 @@ class TaskSpec:
         source: where the task comes from, e.g. ``"bullet-safety-gym 1.4.0"``.
         max_episode_steps: the time limit (Gymnasium's ``TimeLimit``) of one episode.
         cost_limit: the default per-episode cost limit ``d`` (``task.cost_limit``): the paper's.
-        benchmark_cost_limit: the limit the peers benchmark the task at, where it differs from
-            ``cost_limit`` (OmniSafe's 25 for the Safety-Gymnasium Goal tasks); the limit
-            ``experiment=safe`` trains at (:attr:`safe_cost_limit`). ``None``: ``cost_limit``.
-        safe: the task's own values of the recommended preset (:class:`SafeSettings`).
         obs_dim: observation size.
         act_dim: action size.
         cost_rule: the per-step cost in one line, e.g. ``"1 if vx > 3.2096"``.
@@ -83,8 +59,6 @@ class TaskSpec:
     act_dim: int
     cost_rule: str
     margin_rule: str | None = None
-    benchmark_cost_limit: float | None = None
-    safe: SafeSettings = SafeSettings()
     extra: str | None = None
     registered_as: str | None = None
     requires_module: str | None = None
@@ -97,12 +71,6 @@ class TaskSpec:
                 f"TaskSpec({self.env_id!r}).family is {self.family!r}; "
                 f"valid families are {', '.join(FAMILIES)}."
             )
-
-    @property
-    def safe_cost_limit(self) -> float:
-        """The per-episode limit ``experiment=safe`` trains at: the peers' benchmark limit where
-        the task has one, else the paper's ``cost_limit``."""
-        return self.cost_limit if self.benchmark_cost_limit is None else self.benchmark_cost_limit
 
     @property
     def gym_id(self) -> str:

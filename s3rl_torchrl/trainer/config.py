@@ -38,6 +38,7 @@ from s3rl_torchrl.algorithms.registry import ALGORITHMS, family_of
 from s3rl_torchrl.algorithms.schedule import collector_batch_frames
 from s3rl_torchrl.envs import BATCHING_CHOICES, get_task, require_task_module, task_names
 from s3rl_torchrl.modules import ACTIVATIONS
+from s3rl_torchrl.trainer.presets import SAFE_SETTING_NAMES, safe_task_settings
 
 __all__ = [
     "ConfigError",
@@ -443,21 +444,22 @@ def lagrangian_for(algo_name: str, controller: str) -> str:
 
 
 def safe_cost_limit(task_name: str) -> float:
-    """The limit ``experiment=safe`` trains a task at (``TaskSpec.safe_cost_limit``: the peers'
-    benchmark limit where the registry has one, e.g. 25 for SafetyPointGoal1, else the paper's
-    10); ``${s3rl_safe_cost_limit:${task.name}}``. A ``task.cost_limit=`` override still wins."""
+    """The limit ``experiment=safe`` trains a task at: its own in the preset's table
+    (``trainer/presets.py``: 25 for SafetyPointGoal1, OmniSafe's), else the task's default, the
+    paper's 10; ``${s3rl_safe_cost_limit:${task.name}}``. A ``task.cost_limit=`` override wins."""
     check_choice("task.name", task_name, tuple(task_names()))
-    return float(get_task(task_name).safe_cost_limit)
+    own = safe_task_settings(task_name).cost_limit
+    return float(get_task(task_name).cost_limit if own is None else own)
 
 
 def safe_setting(task_name: str, name: str, default: Any) -> Any:
-    """A task's own value of one setting of ``experiment=safe`` (``TaskSpec.safe``), else
-    ``default``: ``${s3rl_safe_setting:${task.name},lagrangian_lr,3e-4}``."""
+    """A task's own value of one setting of ``experiment=safe`` (its entry in
+    ``trainer/presets.py:SAFE_TASK_SETTINGS``), else ``default``:
+    ``${s3rl_safe_setting:${task.name},lagrangian_lr,3e-4}``."""
     check_choice("task.name", task_name, tuple(task_names()))
-    settings = get_task(task_name).safe
-    if not hasattr(settings, name):
-        fail("s3rl_safe_setting", name, f"TaskSpec.safe has no setting {name!r}")
-    value = getattr(settings, name)
+    if name not in SAFE_SETTING_NAMES:
+        fail("s3rl_safe_setting", name, f"valid settings are {', '.join(SAFE_SETTING_NAMES)}")
+    value = getattr(safe_task_settings(task_name), name)
     return default if value is None else value
 
 
@@ -473,7 +475,7 @@ def register_configs() -> None:
     ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs),
     ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only),
     ``s3rl_safe_cost_limit`` and ``s3rl_safe_setting`` (``experiment=safe``'s per-task limit
-    and settings, from the task registry)."""
+    and settings, from its table: ``trainer/presets.py``)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
     OmegaConf.register_new_resolver("s3rl_run_dir", hydra_run_dir, replace=True)
     OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)

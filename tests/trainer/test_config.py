@@ -385,16 +385,16 @@ def test_a_run_that_cannot_learn_is_refused(compose):
         validate(compose("experiment=tiny", "collector.total_frames=200", "algo.batch_size=200"))
 
 
-def test_safe_preset_reads_the_task_registry(compose):
-    # experiment=safe takes a task's own values (TaskSpec.safe, benchmark_cost_limit) where the
-    # registry has them, its defaults elsewhere; a command-line value still wins.
-    from s3rl_torchrl.envs import get_task
+def test_safe_preset_reads_its_table_of_task_values(compose):
+    # experiment=safe takes a task's own values (trainer/presets.py) where its table has them,
+    # its defaults elsewhere; a command-line value still wins.
+    from s3rl_torchrl.trainer.presets import safe_task_settings
 
     goal = validate(compose("experiment=safe", "task=SafetyPointGoal1-v0"))
-    spec = get_task("SafetyPointGoal1-v0")
-    assert goal.algo.lagrangian_lr == spec.safe.lagrangian_lr == 3e-6
-    assert goal.algo.lagrangian_warmup_frames == spec.safe.lagrangian_warmup_frames == 100_000
-    assert goal.task.cost_limit == spec.benchmark_cost_limit == 25.0
+    own = safe_task_settings("SafetyPointGoal1-v0")
+    assert goal.algo.lagrangian_lr == own.lagrangian_lr == 3e-6
+    assert goal.algo.lagrangian_warmup_frames == own.lagrangian_warmup_frames == 100_000
+    assert goal.task.cost_limit == own.cost_limit == 25.0
     ball = validate(compose("experiment=safe", "task=SafetyBallRun-v0"))
     assert ball.algo.lagrangian_lr == 3e-4 and ball.task.cost_limit == 10.0
     assert ball.algo.lagrangian_warmup_frames == ball.collector.init_random_frames == 2000
@@ -405,11 +405,11 @@ def test_safe_preset_reads_the_task_registry(compose):
     assert paper.task.cost_limit == 10.0 and paper.algo.lagrangian_warmup_frames == 0
 
 
-def test_sound_critics_read_the_cost_pair_as_the_task_registry_says(compose):
-    from s3rl_torchrl.envs import get_task
+def test_sound_critics_read_the_cost_pair_as_the_presets_table_says(compose):
+    from s3rl_torchrl.trainer.presets import safe_task_settings
 
     hopper = "SafetyHopperVelocity-v1"
-    assert get_task(hopper).safe.cost_critic_read == "mean"
+    assert safe_task_settings(hopper).cost_critic_read == "mean"
     for algo in ("sac_lag", "s3rl"):
         cfg = validate(compose("experiment=safe", f"task={hopper}", f"algo={algo}"))
         assert cfg.algo.cost_critic_read == "mean" and cfg.algo.cost_nonnegative
