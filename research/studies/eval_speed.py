@@ -12,7 +12,8 @@ the deterministic policy (no video), each rollout the task's episode length (the
 ``eval.max_steps: null``). It reports the wall and process CPU time of ``import s3rl_torchrl``
 and the process CPU time per env step (every step of both copies). Trees and tasks are
 interleaved round by round, so that load from other jobs hits both alike; the table gives the
-median over rounds. Only APIs that both versions share are used (``make_env``, ``evaluate``).
+median over rounds and a Mann-Whitney U test of after against before (``--summarise JSON``
+recomputes it from a result file's rounds). Only APIs that both versions share are used (``make_env``, ``evaluate``).
 """
 
 from __future__ import annotations
@@ -86,45 +87,72 @@ def commit(tree: str) -> str | None:
     return done.stdout.strip() or None
 
 
+def summarise(rows: dict[str, list[dict]]) -> list[dict]:
+    """Per family: the medians over rounds, and a two-sided Mann-Whitney U test of after
+    against before (the rounds of one version are not paired with the other's)."""
+    from scipy.stats import mannwhitneyu
+
+    summary = []
+    for family, task in TASKS.items():
+        before, after = rows[f"{family}/before"], rows[f"{family}/after"]
+        row = {"family": family, "task": task}
+        for key in ("eval_cpu_ms_per_step", "import_cpu_s"):
+            b, a = [r[key] for r in before], [r[key] for r in after]
+            row[f"{key}_before"], row[f"{key}_after"] = statistics.median(b), statistics.median(a)
+            row[f"{key}_p"] = float(mannwhitneyu(a, b).pvalue)
+        summary.append(row)
+    # The import does not depend on the task: every process's, pooled.
+    b = [r["import_cpu_s"] for k, v in rows.items() if k.endswith("/before") for r in v]
+    a = [r["import_cpu_s"] for k, v in rows.items() if k.endswith("/after") for r in v]
+    summary.append({"family": "all", "import_cpu_s_before": statistics.median(b),
+                    "import_cpu_s_after": statistics.median(a),
+                    "import_cpu_s_p": float(mannwhitneyu(a, b).pvalue)})
+    return summary
+
+
+def print_table(summary: list[dict]) -> None:
+    print("| family | task | eval CPU ms/step before | after | p | import CPU s before | after | p |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    for r in summary:
+        step = (f"{r['eval_cpu_ms_per_step_before']:.2f} | {r['eval_cpu_ms_per_step_after']:.2f} "
+                f"| {r['eval_cpu_ms_per_step_p']:.2f}") if "task" in r else "- | - | -"
+        print(f"| {r['family']} | {r.get('task', '')} | {step} | {r['import_cpu_s_before']:.2f} "
+              f"| {r['import_cpu_s_after']:.2f} | {r['import_cpu_s_p']:.2f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trees", nargs=2, required=True, metavar=("BEFORE", "AFTER"))
+    parser.add_argument("--trees", nargs=2, metavar=("BEFORE", "AFTER"))
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--episodes", type=int, default=2)
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--summarise", type=Path, metavar="JSON",
+                        help="recompute the summary of a result file's rounds, measure nothing")
     args = parser.parse_args()
 
-    rows: dict[tuple[str, str], list[dict]] = {}
+    if args.summarise:
+        result = json.loads(args.summarise.read_text())
+        result["summary"] = summarise(result["rows"])
+        args.summarise.write_text(json.dumps(result, indent=1) + "\n")
+        print_table(result["summary"])
+        return
+    if not args.trees:
+        parser.error("--trees BEFORE AFTER is required unless --summarise is given")
+    rows: dict[str, list[dict]] = {}
     for _ in range(args.rounds):
         for family, task in TASKS.items():
             for label, tree in zip(("before", "after"), args.trees):
-                rows.setdefault((family, label), []).append(measure(tree, task, args.episodes))
-
-    def median(family: str, label: str, key: str) -> float:
-        return statistics.median(r[key] for r in rows[family, label])
-
-    print("| family | task | eval CPU ms/step before | after | after/before "
-          "| import CPU s before | after |")
-    print("|---|---|---:|---:|---:|---:|---:|")
-    summary = []
-    for family, task in TASKS.items():
-        before = median(family, "before", "eval_cpu_ms_per_step")
-        after = median(family, "after", "eval_cpu_ms_per_step")
-        imp_b = median(family, "before", "import_cpu_s")
-        imp_a = median(family, "after", "import_cpu_s")
-        print(f"| {family} | {task} | {before:.3f} | {after:.3f} | {after / before:.3f} "
-              f"| {imp_b:.2f} | {imp_a:.2f} |")
-        summary.append({"family": family, "task": task, "eval_cpu_ms_per_step_before": before,
-                        "eval_cpu_ms_per_step_after": after, "import_cpu_s_before": imp_b,
-                        "import_cpu_s_after": imp_a})
+                rows.setdefault(f"{family}/{label}", []).append(
+                    measure(tree, task, args.episodes))
+    summary = summarise(rows)
+    print_table(summary)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps({
             "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
             "trees": args.trees, "commits": [commit(tree) for tree in args.trees],
             "rounds": args.rounds, "episodes": args.episodes,
-            "summary": summary,
-            "rows": {f"{f}/{label}": r for (f, label), r in rows.items()},
+            "summary": summary, "rows": rows,
         }, indent=1) + "\n")
 
 
