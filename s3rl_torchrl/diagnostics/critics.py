@@ -138,8 +138,8 @@ def critic_calibration(
     with ``gamma``. Rows are every ``ceil(rows / max_rows)``-th step. Returns, for ``reward``
     and ``cost`` (summed over costs): ``critic/<signal>_q`` (mean prediction),
     ``critic/<signal>_return`` (mean return), ``critic/<signal>_error`` (mean prediction minus
-    return) and ``critic/<signal>_rmse``; NaN without a finished episode. The reward critic is a soft critic: its value includes the
-    entropy bonus, which its error therefore includes too.
+    return) and ``critic/<signal>_rmse``; NaN without a finished episode. The reward critic is a
+    soft critic: its value includes the entropy bonus, which its error therefore includes too.
     """
     names = ("q", "return", "error", "rmse")
     out = {f"critic/{s}_{n}": math.nan for s in ("reward", "cost") for n in names}
