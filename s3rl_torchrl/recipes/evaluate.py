@@ -29,6 +29,7 @@ from omegaconf import MISSING, DictConfig, OmegaConf
 
 from s3rl_torchrl._render_backend import RenderBackendError
 from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_known_warnings
+from s3rl_torchrl.recipes.unknown_options import hint_unknown_option
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
@@ -134,7 +135,8 @@ def _main(cfg: DictConfig) -> float:
 
 
 def main() -> None:
-    _main()
+    with hint_unknown_option("s3rl-eval", "evaluate"):
+        _main()
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ from typing import Any, NoReturn
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, open_dict, read_write
 
+from s3rl_torchrl.recipes.unknown_options import describe_unknown_option
 from s3rl_torchrl.trainer.run_lock import LOCK_FILE, RunInUseError, RunLock
 
 __all__ = ["RUN_FILES", "LaunchChecks", "job_problem"]
@@ -180,7 +181,8 @@ def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
         try:
             job_config = loader.load_sweep_config(config, list(overrides))
         except Exception as err:  # a value of the wrong type, an unknown key: Hydra's message
-            jobs.append((list(overrides), str(err).strip().splitlines()[0]))
+            problem = describe_unknown_option(err, "s3rl-train")
+            jobs.append((list(overrides), problem or str(err).strip().splitlines()[0]))
             continue
         jobs.append((list(overrides), job_problem(job_config)))
     return jobs

@@ -23,6 +23,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
 from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_known_warnings
+from s3rl_torchrl.recipes.unknown_options import hint_unknown_option
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
@@ -123,7 +124,8 @@ def _main(cfg: DictConfig) -> float:
 
 
 def main() -> None:
-    _main()
+    with hint_unknown_option("s3rl-train", "train"):
+        _main()
 
 
 if __name__ == "__main__":

@@ -1,0 +1,121 @@
+"""A command-line key the config does not have: which keys its node does have.
+
+Hydra refuses ``s3rl-train algo.actor_lrr=1e-3`` (or ``s3rl-eval eval.episodes=1``, the training
+command's key) with "Could not override 'algo.actor_lrr'", a suggestion to append the key with
+``+`` (which a structured config refuses too) and OmegaConf's "Key 'actor_lrr' not in
+'SACConfig'": the problem, but not the valid choices. :func:`describe_unknown_option` turns
+that error into one line naming the keys the node has and the closest one; the recipes print
+it after Hydra's message (:func:`hint_unknown_option`), and a sweep's refused jobs carry it
+(:mod:`s3rl_torchrl.recipes.launch_checks`).
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from omegaconf import DictConfig
+from omegaconf.errors import ConfigAttributeError, ConfigKeyError
+
+__all__ = ["describe_unknown_option", "hint_unknown_option"]
+
+_OVERRIDE = re.compile(r"To append to your config use \+(?P<line>\S.*)$", re.MULTILINE)
+
+
+def _unknown_key_error(err: BaseException) -> ConfigKeyError | ConfigAttributeError | None:
+    seen = err
+    while seen is not None:
+        if isinstance(seen, (ConfigKeyError, ConfigAttributeError)) and isinstance(
+            getattr(seen, "parent_node", None), DictConfig
+        ):
+            return seen
+        seen = seen.__cause__
+    return None
+
+
+def describe_unknown_option(err: BaseException, command: str) -> str | None:
+    """For Hydra's refusal of an override whose key the config does not have: one line naming
+    the key, the keys its node has, and the closest of them (or the override without the
+    unknown part, when what follows it is a key there: ``eval.episodes=1`` -> ``episodes=1``).
+    None for any other error."""
+    cause = _unknown_key_error(err)
+    if cause is None:
+        return None
+    unknown = str(cause.key)
+    full_key = str(cause.full_key or unknown)
+    node = full_key[: -len(unknown)].rstrip(".") if full_key.endswith(unknown) else ""
+    keys = [str(k) for k in cause.parent_node.keys() if not (node == "" and k == "hydra")]
+    match = _OVERRIDE.search(str(err))
+    value = match.group("line").split("=", 1)[1] if match and "=" in match.group("line") else None
+    given = match.group("line").split("=", 1)[0] if match else full_key
+    where = f"{node} ({cause.object_type.__name__})" if node and cause.object_type else node
+    line = f"unknown option '{given}': {where or command} has no '{unknown}'"
+    line += f"; its options: {', '.join(keys)}."
+    prefix = f"{node}." if node else ""
+    rest = given[len(prefix) + len(unknown) :].lstrip(".")
+    if rest and rest.split(".")[0] in keys:
+        suggestion = prefix + rest  # a key of the other command's config (eval.episodes)
+    else:
+        close = difflib.get_close_matches(unknown, keys, n=1)
+        suggestion = prefix + close[0] + (f".{rest}" if rest else "") if close else None
+    if suggestion is not None:
+        line += f" Did you mean {suggestion}{'' if value is None else '=' + value}?"
+    return line
+
+
+def _first_job_overrides(arguments: list[str]) -> list[str]:
+    """The command's overrides with each sweep (``seed=1,2``) at its first value: one job."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    overrides = []
+    for override in OverridesParser.create().parse_overrides(arguments):
+        if override.is_sweep_override():
+            first = next(iter(override.sweep_string_iterator()))
+            overrides.append(f"{override.get_key_element()}={first}")
+        else:
+            overrides.append(override.input_line)
+    return overrides
+
+
+def _composition_error(config_name: str, arguments: list[str]) -> Exception | None:
+    """What composing the command's config (its first job, for a sweep) raises, if anything."""
+    from hydra import compose, initialize_config_dir
+    from hydra._internal.utils import get_args_parser
+    from hydra.core.global_hydra import GlobalHydra
+
+    from s3rl_torchrl.recipes import config_dir
+
+    try:
+        args = get_args_parser().parse_args(arguments)
+        overrides = _first_job_overrides(args.overrides)
+    except (Exception, SystemExit):  # not a command Hydra itself would have parsed
+        return None
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            compose(config_name=args.config_name or config_name, overrides=overrides)
+    except Exception as err:
+        return err
+    finally:
+        GlobalHydra.instance().clear()
+    return None
+
+
+@contextmanager
+def hint_unknown_option(command: str, config_name: str) -> Iterator[None]:
+    """Around a recipe's Hydra main: when Hydra stops (status 1) on a key the config does not
+    have, print after its message the line of :func:`describe_unknown_option`. Hydra prints
+    and exits before the exception could be read, so the command's config is composed once
+    more, only then."""
+    try:
+        yield
+    except SystemExit as stop:
+        if stop.code == 1:
+            err = _composition_error(config_name, sys.argv[1:])
+            hint = describe_unknown_option(err, command) if err is not None else None
+            if hint is not None:
+                print(f"{command}: {hint}", file=sys.stderr)
+        raise
