@@ -48,3 +48,27 @@ def test_each_row_by_hand():
         over = [float(r["eval/cost"]) > limit for r in metrics]
         assert row[7] == f"{sum(train) / len(train):.1f}"
         assert row[8] == f"{sum(over) / len(over):.2f}"
+
+
+def test_the_notes_critic_table_is_the_runs_metrics():
+    """research/2026-11-28-delivered-policy.md's SafetyPointGoal1 critic table: each cell the mean
+    of metrics.csv's column over the epochs of its window."""
+    note = (ROOT / "research" / "2026-11-28-delivered-policy.md").read_text()
+    windows = {"100-300k": (100_000, 300_000), "800k-1M": (800_000, 1_000_000)}
+    for candidate in ("goal_mean", "goal_bound"):
+        path = RESULTS / candidate / "sac_lag_SafetyPointGoal1-v0" / "seed1" / "metrics.csv"
+        with path.open() as f:
+            metrics = list(csv.DictReader(f))
+        for label, (low, high) in windows.items():
+            rows = [r for r in metrics if low < float(r["frames"]) <= high]
+            assert len(rows) == 20
+
+            def mean(column, rows=rows):
+                return f"{sum(float(r[column]) for r in rows) / len(rows):.2f}"
+
+            row = (
+                f"| `{candidate}` | {label} | {mean('critic/reward_q')} / "
+                f"{mean('critic/reward_return')} | {mean('critic/cost_q')} / "
+                f"{mean('critic/cost_return')} | {mean('lagrangian')} |"
+            )
+            assert row in note
