@@ -70,9 +70,13 @@ def test_the_committed_sweeps_are_found():
     # An empty glob would parametrise nothing and pass silently.
     assert {"evidence", "table1", "critic_selection_goal4", "critic_selection_goal5"} <= set(SWEEPS)
     assert RETIRED == ["critic_selection_ballrun"]  # algo.cost_gamma
-    # The package ships the recommended preset's Table 1 sweep, not the research rounds.
-    assert {p.stem for p in (config_dir() / "sweep").glob("*.yaml")} == {"table1"}
-    assert all(is_research(name) for name in SWEEPS if name != "table1")
+    # The package ships the reference's sweeps (Table 1 under the recommended preset, the
+    # paper-settings reproduction), not the research rounds.
+    shipped = {"table1", "reproduction"}
+    assert {p.stem for p in (config_dir() / "sweep").glob("*.yaml")} == shipped
+    assert all(is_research(name) for name in SWEEPS if name not in shipped)
+    # Issue 63's runs: four tasks, two algos, three seeds.
+    assert len(sweep_jobs("reproduction")) == 24
 
 
 @pytest.mark.parametrize("name", RETIRED)
