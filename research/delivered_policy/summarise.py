@@ -8,6 +8,12 @@ Per run: the candidate (the directory below the root), the last policy's and the
 pick's final evaluation (reward / cost, 10 episodes), the training cost and the share of epochs
 whose 2-episode evaluation was over the limit, both over the last 20% of the run's frames, and
 lambda's mean there. Unfinished runs are listed with the frames they reached.
+
+Then one row per candidate and protocol (the last policy; the delivered pick), over its finished
+runs: how many keep the limit, and their reward against the committed runs of the same algo and
+task (the mean last-policy reward of seeds 10/20/30 in results/safe_sound + results/table1),
+as the median of the ratios. research/2026-11-28-delivered-policy.md states the rule that
+chooses from this table.
 """
 
 from __future__ import annotations
@@ -18,6 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from s3rl_torchrl.report.runs import find_runs
+
+ROOT = Path(__file__).resolve().parents[2]
+# The committed runs under experiment=safe: what the issue counts against.
+COMMITTED = (ROOT / "results" / "safe_sound", ROOT / "results" / "table1")
 
 
 def tail(run, column: str, share: float = 0.2) -> np.ndarray:
@@ -51,6 +61,53 @@ def rows(root: Path) -> list[list[str]]:
     return sorted(table, key=lambda r: (r[2], r[1], int(r[3]), r[0]))
 
 
+def committed_rewards(roots=COMMITTED) -> dict[tuple[str, str], float]:
+    """(algo, task) -> the committed runs' mean last-policy reward."""
+    rewards: dict[tuple[str, str], list[float]] = {}
+    for root in roots:
+        for run in find_runs(root):
+            if run.finished:
+                rewards.setdefault((run.algo, run.task), []).append(run.final["reward_mean"])
+    return {key: float(np.mean(values)) for key, values in rewards.items()}
+
+
+def candidate_rows(root: Path, committed: dict[tuple[str, str], float]) -> list[list[str]]:
+    """Per candidate and protocol: runs within the limit of the finished ones, and the median
+    of their reward over the committed group's mean reward."""
+    results: dict[tuple[str, str], list[tuple[bool, float | None]]] = {}
+    for run in find_runs(root):
+        if not run.finished:
+            continue
+        candidate = run.path.relative_to(root).parts[0]
+        reference = committed[(run.algo, run.task)]
+        evaluated = {"last policy": run.final, "delivered pick": run.final.get("delivered")}
+        for protocol, result in evaluated.items():
+            if result is not None:
+                # A ratio only against a group that earns reward (SafetyPointGoal1's committed
+                # runs earn ~0: its target is absolute, reward >= 20).
+                ratio = result["reward_mean"] / reference if reference > 1.0 else None
+                results.setdefault((candidate, protocol), []).append(
+                    (result["cost_mean"] <= run.cost_limit, ratio)
+                )
+    table = []
+    for (candidate, protocol), runs in sorted(results.items()):
+        kept = sum(within for within, _ in runs)
+        ratios = [r for _, r in runs if r is not None]
+        median = f"{np.median(ratios):.2f}" if ratios else "–"
+        table.append([candidate, protocol, f"{kept} of {len(runs)}", median])
+    return table
+
+
+CANDIDATE_HEADER = ["candidate", "protocol", "within the limit",
+                    "reward / committed mean (median)"]
+
+
+def markdown(header: list[str], table: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
+        "| " + " | ".join(row) + " |" for row in table
+    ]
+
+
 HEADER = ["candidate", "algo", "task", "seed", "limit", "last policy: reward / cost",
           "delivered pick: reward / cost", "train cost, last 20%",
           "epochs over the limit, last 20%", "lambda, last 20%"]
@@ -61,8 +118,8 @@ def main() -> None:
     parser.add_argument("root", type=Path)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows(args.root)]
+    lines = markdown(HEADER, rows(args.root))
+    lines += ["", *markdown(CANDIDATE_HEADER, candidate_rows(args.root, committed_rewards()))]
     text = "\n".join(lines) + "\n"
     if args.out is None:
         print(text)

@@ -25,7 +25,42 @@ def test_the_committed_table_is_the_exported_runs_table():
     committed = (ROOT / "research" / "delivered_policy" / "selection.md").read_text()
     lines = ["| " + " | ".join(module.HEADER) + " |", "|" + "---|" * len(module.HEADER)]
     lines += ["| " + " | ".join(row) + " |" for row in module.rows(RESULTS)]
+    header = module.CANDIDATE_HEADER
+    lines += ["", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    rows = module.candidate_rows(RESULTS, module.committed_rewards())
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
     assert committed == "\n".join(lines) + "\n"
+
+
+def test_each_candidates_tally_by_hand():
+    committed = {}
+    for tree in ("safe_sound", "table1"):
+        for final_path in (ROOT / "results" / tree).rglob("final_eval.json"):
+            config = json.loads((final_path.parent / "config.json").read_text())
+            key = (config["algo"]["name"], config["task"]["name"])
+            committed.setdefault(key, []).append(json.loads(final_path.read_text())["reward_mean"])
+    tally = {}
+    for final_path in RESULTS.rglob("final_eval.json"):
+        run = final_path.parent
+        config = json.loads((run / "config.json").read_text())
+        final = json.loads(final_path.read_text())
+        rewards = committed[(config["algo"]["name"], config["task"]["name"])]
+        reference = sum(rewards) / len(rewards)
+        assert len(rewards) == 3
+        for protocol, result in (("last policy", final), ("delivered pick", final["delivered"])):
+            kept, ratios = tally.setdefault((run.relative_to(RESULTS).parts[0], protocol), ([], []))
+            kept.append(result["cost_mean"] <= config["task"]["cost_limit"])
+            if reference > 1.0:
+                ratios.append(result["reward_mean"] / reference)
+    module = _summarise()
+    rows = {(r[0], r[1]): r[2:] for r in module.candidate_rows(RESULTS, module.committed_rewards())}
+    assert set(rows) == set(tally)
+    for key, (kept, ratios) in tally.items():
+        ratios = sorted(ratios)
+        middle = len(ratios) // 2
+        median = (ratios[middle] if len(ratios) % 2 else (ratios[middle - 1] + ratios[middle]) / 2
+                  ) if ratios else None
+        assert rows[key] == [f"{sum(kept)} of {len(kept)}", "–" if median is None else f"{median:.2f}"]
 
 
 def test_each_row_by_hand():
