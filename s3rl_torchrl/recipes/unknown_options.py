@@ -93,6 +93,8 @@ def _composition_error(config_name: str, arguments: list[str]) -> Exception | No
         overrides = _first_job_overrides(args.overrides)
     except (Exception, SystemExit):  # not a command Hydra itself would have parsed
         return None
+    if args.config_dir or args.config_path:  # configs of the user's: composed here they differ
+        return None
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
