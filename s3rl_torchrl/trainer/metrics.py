@@ -190,9 +190,8 @@ class RunMetrics:
     def appended_files(self) -> dict[str, int]:
         """What a checkpoint records (:func:`appended_files`), once the logger has written
         what it buffers (TensorBoard's writer holds events back)."""
-        flush = getattr(getattr(self.logger, "experiment", None), "flush", None)
-        if callable(flush):
-            flush()
+        if self.logger is not None:
+            self.logger.flush()  # torchrl's: the experiment's own flush, where it has one
         return appended_files(self.run_dir)
 
     def close(self) -> None:
