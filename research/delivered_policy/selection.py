@@ -7,7 +7,12 @@ seeds 1 and 2 only (the reported seeds are 10, 20 and 30), in
 `<out>/<candidate>/<algo>_<task>/seed<N>`. Run again after an interruption, the same command
 resumes every unfinished run (`resume=auto`) and skips the finished ones (`final_eval.json`). Two runs at a time, one thread each (2 cores):
 
-    python research/delivered_policy/selection.py --out /work/runs/delivered_selection
+    python research/delivered_policy/selection.py --out /work/runs/delivered_selection \
+        --export research/results/delivered_selection
+
+With `--export`, each run is copied there as it finishes (`s3rl-report --export-runs`'s files:
+config.json, metrics.csv, final_eval.json), and a run whose copy is there already is skipped:
+checkpoints live only on the machine that wrote them, the copies in version control.
 
 Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
@@ -84,10 +89,13 @@ def jobs(out: Path):
             ]
 
 
-def run(job) -> str:
+def run(job, out: Path, export: Path | None = None) -> str:
     run_dir, overrides = job
+    copy = None if export is None else export / run_dir.relative_to(out)
+    if copy is not None and (copy / "final_eval.json").exists():
+        return f"exported already: {copy}"
     if (run_dir / "final_eval.json").exists():
-        return f"done already: {run_dir}"
+        return f"done already: {run_dir}" + _export(run_dir, copy)
     run_dir.mkdir(parents=True, exist_ok=True)
     with open(run_dir.parent / f"{run_dir.name}.log", "a") as log:
         code = subprocess.call(
@@ -96,16 +104,27 @@ def run(job) -> str:
             stderr=subprocess.STDOUT,
             env=os.environ,
         )
-    return f"exit {code}: {run_dir}"
+    return f"exit {code}: {run_dir}" + (_export(run_dir, copy) if code == 0 else "")
+
+
+def _export(run_dir: Path, copy: Path | None) -> str:
+    if copy is None:
+        return ""
+    from s3rl_torchrl.report.runs import export_runs
+
+    export_runs(run_dir, copy)
+    return f" -> {copy}"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--export", type=Path, default=None,
+                        help="copy each finished run here; skip the runs copied already")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
     with ThreadPoolExecutor(args.workers) as pool:
-        for line in pool.map(run, jobs(args.out)):
+        for line in pool.map(lambda job: run(job, args.out, args.export), jobs(args.out)):
             print(line, flush=True)
 
 
