@@ -8,6 +8,8 @@ import importlib.util
 import json
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "research" / "results" / "delivered_selection"
 
@@ -107,3 +109,37 @@ def test_the_notes_critic_table_is_the_runs_metrics():
                 f"{mean('critic/cost_return')} | {mean('lagrangian')} |"
             )
             assert row in note
+
+
+def _selection():
+    path = ROOT / "research" / "delivered_policy" / "selection.py"
+    spec = importlib.util.spec_from_file_location("selection", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_finished_run_is_exported_once_and_then_skipped(tmp_path, monkeypatch):
+    """The queue copies a finished run's result files (not its checkpoints) into --export, and on
+    a machine without the run (checkpoints gone) skips it because the copy is there."""
+    module = _selection()
+    out, export = tmp_path / "runs", tmp_path / "exported"
+    source = ROOT / "results" / "table1" / "s3rl_SafetyAntRun-v0" / "seed10"
+    job = next(module.jobs(out))
+    run_dir = job[0]
+    run_dir.mkdir(parents=True)
+    for name in ("config.json", "metrics.csv", "final_eval.json"):
+        (run_dir / name).write_bytes((source / name).read_bytes())
+    (run_dir / "checkpoints" / "latest").mkdir(parents=True)
+    (run_dir / "checkpoints" / "latest" / "state.pt").write_bytes(b"not exported")
+    monkeypatch.setattr(module.subprocess, "call", lambda *a, **k: pytest.fail("trained"))
+
+    assert module.run(job, out, export).startswith("done already")
+    copy = export / run_dir.relative_to(out)
+    assert sorted(p.name for p in copy.iterdir()) == [
+        "config.json", "final_eval.json", "metrics.csv"]
+    assert (copy / "metrics.csv").read_bytes() == (source / "metrics.csv").read_bytes()
+
+    for path in sorted(run_dir.rglob("*"), reverse=True):  # another machine: no run directory
+        path.unlink() if path.is_file() else path.rmdir()
+    assert module.run(job, out, export) == f"exported already: {copy}"
