@@ -14,7 +14,8 @@ With `--export`, each run is copied there as it finishes (`s3rl-report --export-
 config.json, metrics.csv, final_eval.json), and a run whose copy is there already is skipped:
 checkpoints live only on the machine that wrote them, the copies in version control.
 
-Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES):
+Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, after
+the two of RETIRED_GOAL_CANDIDATES):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
@@ -40,9 +41,25 @@ CANDIDATES = {
 # SafetyPointGoal1 stops moving once lambda passes 0.14-0.21 (its cost critic, read through the
 # max of its pair, reads 12-16 against a reward critic of ~2): two ways to keep the penalty
 # commensurate with a goal reward of ~0.025 a step, at the full 1M frames its target is set at.
-GOAL_CANDIDATES = {
+# Both missed on SAC-Lag seed 1 (research/2026-11-28-delivered-policy.md), so neither can meet the
+# choice rule (every seed of both algos at reward >= 20, cost <= 25): their other runs are not
+# queued, and their seed-1 runs stay in research/results/delivered_selection.
+RETIRED_GOAL_CANDIDATES = {
     "goal_mean": ["algo.cost_critic_read=mean"],  # the pair's mean: no premium on the unvisited
     "goal_bound": ["algo.lagrangian_max=0.1"],  # below where every committed seed stopped
+}
+# OmniSafe's SACLag on this task (reference-semantics §9, its configs/off-policy/SACLag.yaml)
+# at this trainer's 0.2 updates per frame: alpha fixed at 1e-5, the actor's rate 5e-6 per frame
+# (2.5e-5 per update), lambda frozen for 200k frames, then 5e-7 per frame (the task's own 3e-6
+# per update already), and its one cost critic without a pessimistic read (the pair's mean).
+GOAL_CANDIDATES = {
+    "goal_omnisafe": [
+        "algo.auto_alpha=false",
+        "algo.alpha_init=1e-5",
+        "algo.actor_lr=2.5e-5",
+        "algo.lagrangian_warmup_frames=200000",
+        "algo.cost_critic_read=mean",
+    ],
 }
 FRAMES = 500_000
 # (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
@@ -64,8 +81,8 @@ DELIVERY = ["eval.delivery_epochs=10", "eval.delivery_episodes=5"]
 
 def jobs(out: Path):
     # The margin/aim cases of both seeds first: they decide the preset of the 96 evidence runs.
-    # SafetyPointGoal1's runs (77 min each at 1M) come last: both of its candidates missed on
-    # SAC-Lag seed 1 (research/2026-11-28-delivered-policy.md), so they no longer gate the choice.
+    # SafetyPointGoal1's runs (77 min each at 1M) come last: its first two candidates missed on
+    # SAC-Lag seed 1 (research/2026-11-28-delivered-policy.md), so it no longer gates the choice.
     def order(pair):
         seed, (algo, task, candidates, frames) = pair
         return (candidates is GOAL_CANDIDATES, seed)
