@@ -13,7 +13,7 @@ Then one row per candidate and protocol (the last policy; the delivered pick), o
 runs: how many keep the limit, and their reward against the committed runs of the same algo and
 task (the mean last-policy reward of seeds 10/20/30 in results/safe_sound + results/table1),
 as the median of the ratios. research/2026-11-28-delivered-policy.md states the rule that
-chooses from this table.
+chooses from this table; the last line applies it (:func:`choice`).
 """
 
 from __future__ import annotations
@@ -101,6 +101,49 @@ def candidate_rows(root: Path, committed: dict[tuple[str, str], float]) -> list[
 CANDIDATE_HEADER = ["candidate", "protocol", "within the limit",
                     "reward / committed mean (median)"]
 
+# The rule of research/2026-11-28-delivered-policy.md ("How the preset is chosen"), items 1-3:
+# it chooses among these candidates (selection.py's CANDIDATES) once each has its 14 runs
+# (selection.py's seven margin/aim groups x seeds 1 and 2).
+RULE_CANDIDATES = ("margin", "aim")
+RULE_RUNS = 14
+RULE_REWARD_KEPT = 0.85
+RULE_WITHIN = 13
+
+
+def choice(table: list[list[str]]) -> str:
+    """The rule applied to :func:`candidate_rows`' table: the candidate and protocol with the
+    most runs within the limit, a tie going to the higher median reward ratio (1), passing over
+    a median ratio below 0.85 (2), and whether it keeps fewer than 13 of 14 (3)."""
+    ranked, finished = [], {}
+    for candidate, protocol, within, median in table:
+        if candidate not in RULE_CANDIDATES:
+            continue
+        kept, runs = (int(n) for n in within.split(" of "))
+        finished[candidate] = runs
+        ranked.append((kept, float(median), candidate, protocol))
+    done = sum(finished.values())
+    if len(finished) < len(RULE_CANDIDATES) or min(finished.values()) < RULE_RUNS:
+        return (f"The rule decides once each of {', '.join(RULE_CANDIDATES)} has its {RULE_RUNS} "
+                f"runs: {done} of {RULE_RUNS * len(RULE_CANDIDATES)} have finished.")
+    ranked.sort(key=lambda r: (r[0], r[1]), reverse=True)
+    passed = [r for r in ranked if r[1] < RULE_REWARD_KEPT]
+    kept_reward = [r for r in ranked if r[1] >= RULE_REWARD_KEPT]
+    lines = []
+    for kept, median, candidate, protocol in passed:
+        if not kept_reward or (kept, median) > kept_reward[0][:2]:
+            lines.append(f"Passed over (reward ratio {median:.2f} < {RULE_REWARD_KEPT}): "
+                         f"{candidate}, {protocol} ({kept} of {RULE_RUNS}).")
+    if not kept_reward:
+        return " ".join(lines + [f"No candidate keeps {RULE_REWARD_KEPT} of the reward: the rule "
+                                 "chooses none."])
+    kept, median, candidate, protocol = kept_reward[0]
+    lines.append(f"The rule's choice: {candidate}, {protocol} ({kept} of {RULE_RUNS} within the "
+                 f"limit, reward ratio {median:.2f}).")
+    if kept < RULE_WITHIN:
+        lines.append(f"Fewer than {RULE_WITHIN} of {RULE_RUNS}: the evidence runs with it and the "
+                     "docs state the miss.")
+    return " ".join(lines)
+
 
 def markdown(header: list[str], table: list[list[str]]) -> list[str]:
     return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + [
@@ -119,7 +162,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     lines = markdown(HEADER, rows(args.root))
-    lines += ["", *markdown(CANDIDATE_HEADER, candidate_rows(args.root, committed_rewards()))]
+    tally = candidate_rows(args.root, committed_rewards())
+    lines += ["", *markdown(CANDIDATE_HEADER, tally), "", choice(tally)]
     text = "\n".join(lines) + "\n"
     if args.out is None:
         print(text)

@@ -31,7 +31,50 @@ def test_the_committed_table_is_the_exported_runs_table():
     lines += ["", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     rows = module.candidate_rows(RESULTS, module.committed_rewards())
     lines += ["| " + " | ".join(row) + " |" for row in rows]
+    lines += ["", module.choice(rows)]
     assert committed == "\n".join(lines) + "\n"
+
+
+def test_the_rule_applied_by_hand():
+    """The note's rule: most runs within the limit, a tie to the higher median reward ratio,
+    a ratio below 0.85 passed over, fewer than 13 of 14 said; undecided until 14 runs each."""
+    choice = _summarise().choice
+    goal = ["goal_omnisafe", "last policy", "0 of 1", "–"]  # not a margin/aim candidate
+    assert choice([["margin", "last policy", "3 of 3", "1.03"], goal]) == (
+        "The rule decides once each of margin, aim has its 14 runs: 3 of 28 have finished.")
+    assert choice([["aim", "last policy", "14 of 14", "1.20"],
+                   ["margin", "last policy", "13 of 13", "0.95"], goal]) == (
+        "The rule decides once each of margin, aim has its 14 runs: 27 of 28 have finished.")
+    table = [
+        ["aim", "delivered pick", "12 of 14", "1.10"],
+        ["aim", "last policy", "13 of 14", "0.90"],
+        ["margin", "delivered pick", "14 of 14", "0.80"],
+        ["margin", "last policy", "13 of 14", "0.95"],
+        goal,
+    ]
+    assert choice(table) == (
+        "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
+        "The rule's choice: margin, last policy (13 of 14 within the limit, reward ratio 0.95).")
+    table[3][2] = "12 of 14"
+    assert choice(table) == (
+        "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
+        "The rule's choice: aim, last policy (13 of 14 within the limit, reward ratio 0.90).")
+    table[1][2] = "11 of 14"
+    assert choice(table) == (
+        "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
+        "The rule's choice: aim, delivered pick (12 of 14 within the limit, reward ratio 1.10). "
+        "Fewer than 13 of 14: the evidence runs with it and the docs state the miss.")
+    for row in table[:4]:
+        row[3] = "0.50"
+    assert choice(table).endswith("No candidate keeps 0.85 of the reward: the rule chooses none.")
+
+
+def test_the_rules_numbers_are_the_queues():
+    """14 runs per candidate: selection.py's margin/aim groups times its seeds."""
+    summarise, selection = _summarise(), _selection()
+    assert set(summarise.RULE_CANDIDATES) == set(selection.CANDIDATES)
+    groups = [case for case in selection.CASES if case[2] is selection.CANDIDATES]
+    assert summarise.RULE_RUNS == len(groups) * len(selection.SEEDS) == 14
 
 
 def test_each_candidates_tally_by_hand():
