@@ -34,6 +34,8 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from s3rl_torchrl.report.runs import export_runs
+
 CANDIDATES = {
     "margin": ["algo.lagrangian_target=0.7"],
     "aim": ["algo.lagrangian_target=0.8", "algo.lagrangian_eval_window=6"],
@@ -127,8 +129,6 @@ def run(job, out: Path, export: Path | None = None) -> str:
 def _export(run_dir: Path, copy: Path | None) -> str:
     if copy is None:
         return ""
-    from s3rl_torchrl.report.runs import export_runs
-
     export_runs(run_dir, copy)
     return f" -> {copy}"
 

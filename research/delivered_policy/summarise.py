@@ -71,9 +71,11 @@ def committed_rewards(roots=COMMITTED) -> dict[tuple[str, str], float]:
     return {key: float(np.mean(values)) for key, values in rewards.items()}
 
 
-def candidate_rows(root: Path, committed: dict[tuple[str, str], float]) -> list[list[str]]:
-    """Per candidate and protocol: runs within the limit of the finished ones, and the median
-    of their reward over the committed group's mean reward."""
+def candidate_tally(
+    root: Path, committed: dict[tuple[str, str], float]
+) -> dict[tuple[str, str], tuple[int, int, float | None]]:
+    """(candidate, protocol) -> (finished runs within the limit, finished runs, the median of
+    their reward over the committed group's mean reward; None where no group earns reward)."""
     results: dict[tuple[str, str], list[tuple[bool, float | None]]] = {}
     for run in find_runs(root):
         if not run.finished:
@@ -89,13 +91,20 @@ def candidate_rows(root: Path, committed: dict[tuple[str, str], float]) -> list[
                 results.setdefault((candidate, protocol), []).append(
                     (result["cost_mean"] <= run.cost_limit, ratio)
                 )
-    table = []
-    for (candidate, protocol), runs in sorted(results.items()):
-        kept = sum(within for within, _ in runs)
+    tally = {}
+    for key, runs in sorted(results.items()):
         ratios = [r for _, r in runs if r is not None]
-        median = f"{np.median(ratios):.2f}" if ratios else "–"
-        table.append([candidate, protocol, f"{kept} of {len(runs)}", median])
-    return table
+        median = float(np.median(ratios)) if ratios else None
+        tally[key] = (sum(within for within, _ in runs), len(runs), median)
+    return tally
+
+
+def candidate_rows(tally: dict[tuple[str, str], tuple[int, int, float | None]]) -> list[list[str]]:
+    """:func:`candidate_tally` as table rows."""
+    return [
+        [candidate, protocol, f"{kept} of {runs}", "–" if median is None else f"{median:.2f}"]
+        for (candidate, protocol), (kept, runs, median) in tally.items()
+    ]
 
 
 CANDIDATE_HEADER = ["candidate", "protocol", "within the limit",
@@ -110,17 +119,16 @@ RULE_REWARD_KEPT = 0.85
 RULE_WITHIN = 13
 
 
-def choice(table: list[list[str]]) -> str:
-    """The rule applied to :func:`candidate_rows`' table: the candidate and protocol with the
-    most runs within the limit, a tie going to the higher median reward ratio (1), passing over
-    a median ratio below 0.85 (2), and whether it keeps fewer than 13 of 14 (3)."""
+def choice(tally: dict[tuple[str, str], tuple[int, int, float | None]]) -> str:
+    """The rule applied to :func:`candidate_tally` (unrounded ratios): the candidate and
+    protocol with the most runs within the limit, a tie going to the higher median reward ratio
+    (1), passing over a median ratio below 0.85 (2), and whether it keeps fewer than 13 of 14
+    (3)."""
     ranked, finished = [], {}
-    for candidate, protocol, within, median in table:
-        if candidate not in RULE_CANDIDATES:
-            continue
-        kept, runs = (int(n) for n in within.split(" of "))
-        finished[candidate] = runs
-        ranked.append((kept, float(median), candidate, protocol))
+    for (candidate, protocol), (kept, runs, median) in tally.items():
+        if candidate in RULE_CANDIDATES:
+            finished[candidate] = runs
+            ranked.append((kept, median, candidate, protocol))
     done = sum(finished.values())
     if len(finished) < len(RULE_CANDIDATES) or min(finished.values()) < RULE_RUNS:
         return (f"The rule decides once each of {', '.join(RULE_CANDIDATES)} has its {RULE_RUNS} "
@@ -162,8 +170,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
     lines = markdown(HEADER, rows(args.root))
-    tally = candidate_rows(args.root, committed_rewards())
-    lines += ["", *markdown(CANDIDATE_HEADER, tally), "", choice(tally)]
+    tally = candidate_tally(args.root, committed_rewards())
+    lines += ["", *markdown(CANDIDATE_HEADER, candidate_rows(tally)), "", choice(tally)]
     text = "\n".join(lines) + "\n"
     if args.out is None:
         print(text)

@@ -14,64 +14,65 @@ ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "research" / "results" / "delivered_selection"
 
 
-def _summarise():
-    path = ROOT / "research" / "delivered_policy" / "summarise.py"
-    spec = importlib.util.spec_from_file_location("summarise", path)
+def _script(name: str):
+    """research/delivered_policy/<name>.py as a module (research/ is not a package)."""
+    path = ROOT / "research" / "delivered_policy" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 def test_the_committed_table_is_the_exported_runs_table():
-    module = _summarise()
+    module = _script("summarise")
     committed = (ROOT / "research" / "delivered_policy" / "selection.md").read_text()
     lines = ["| " + " | ".join(module.HEADER) + " |", "|" + "---|" * len(module.HEADER)]
     lines += ["| " + " | ".join(row) + " |" for row in module.rows(RESULTS)]
     header = module.CANDIDATE_HEADER
     lines += ["", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    rows = module.candidate_rows(RESULTS, module.committed_rewards())
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    lines += ["", module.choice(rows)]
+    tally = module.candidate_tally(RESULTS, module.committed_rewards())
+    lines += ["| " + " | ".join(row) + " |" for row in module.candidate_rows(tally)]
+    lines += ["", module.choice(tally)]
     assert committed == "\n".join(lines) + "\n"
 
 
 def test_the_rule_applied_by_hand():
     """The note's rule: most runs within the limit, a tie to the higher median reward ratio,
     a ratio below 0.85 passed over, fewer than 13 of 14 said; undecided until 14 runs each."""
-    choice = _summarise().choice
-    goal = ["goal_omnisafe", "last policy", "0 of 1", "–"]  # not a margin/aim candidate
-    assert choice([["margin", "last policy", "3 of 3", "1.03"], goal]) == (
+    choice = _script("summarise").choice
+    goal = {("goal_omnisafe", "last policy"): (0, 1, None)}  # not a margin/aim candidate
+    assert choice({("margin", "last policy"): (3, 3, 1.03), **goal}) == (
         "The rule decides once each of margin, aim has its 14 runs: 3 of 28 have finished.")
-    assert choice([["aim", "last policy", "14 of 14", "1.20"],
-                   ["margin", "last policy", "13 of 13", "0.95"], goal]) == (
+    assert choice({("aim", "last policy"): (14, 14, 1.20),
+                   ("margin", "last policy"): (13, 13, 0.95), **goal}) == (
         "The rule decides once each of margin, aim has its 14 runs: 27 of 28 have finished.")
-    table = [
-        ["aim", "delivered pick", "12 of 14", "1.10"],
-        ["aim", "last policy", "13 of 14", "0.90"],
-        ["margin", "delivered pick", "14 of 14", "0.80"],
-        ["margin", "last policy", "13 of 14", "0.95"],
-        goal,
-    ]
+    table = {
+        ("aim", "delivered pick"): (12, 14, 1.10),
+        ("aim", "last policy"): (13, 14, 0.90),
+        ("margin", "delivered pick"): (14, 14, 0.80),
+        ("margin", "last policy"): (13, 14, 0.95),
+        **goal,
+    }
     assert choice(table) == (
         "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
         "The rule's choice: margin, last policy (13 of 14 within the limit, reward ratio 0.95).")
-    table[3][2] = "12 of 14"
+    table["margin", "last policy"] = (12, 14, 0.95)
     assert choice(table) == (
         "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
         "The rule's choice: aim, last policy (13 of 14 within the limit, reward ratio 0.90).")
-    table[1][2] = "11 of 14"
+    table["aim", "last policy"] = (11, 14, 0.90)
     assert choice(table) == (
         "Passed over (reward ratio 0.80 < 0.85): margin, delivered pick (14 of 14). "
         "The rule's choice: aim, delivered pick (12 of 14 within the limit, reward ratio 1.10). "
         "Fewer than 13 of 14: the evidence runs with it and the docs state the miss.")
-    for row in table[:4]:
-        row[3] = "0.50"
+    for key, (kept, runs, _) in list(table.items())[:4]:
+        table[key] = (kept, runs, 0.50)
     assert choice(table).endswith("No candidate keeps 0.85 of the reward: the rule chooses none.")
 
 
 def test_the_rules_numbers_are_the_queues():
     """14 runs per candidate: selection.py's margin/aim groups times its seeds."""
-    summarise, selection = _summarise(), _selection()
+    summarise, selection = _script("summarise"), _script("selection")
     assert set(summarise.RULE_CANDIDATES) == set(selection.CANDIDATES)
     groups = [case for case in selection.CASES if case[2] is selection.CANDIDATES]
     assert summarise.RULE_RUNS == len(groups) * len(selection.SEEDS) == 14
@@ -97,8 +98,9 @@ def test_each_candidates_tally_by_hand():
             kept.append(result["cost_mean"] <= config["task"]["cost_limit"])
             if reference > 1.0:
                 ratios.append(result["reward_mean"] / reference)
-    module = _summarise()
-    rows = {(r[0], r[1]): r[2:] for r in module.candidate_rows(RESULTS, module.committed_rewards())}
+    module = _script("summarise")
+    computed = module.candidate_tally(RESULTS, module.committed_rewards())
+    rows = {(r[0], r[1]): r[2:] for r in module.candidate_rows(computed)}
     assert set(rows) == set(tally)
     for key, (kept, ratios) in tally.items():
         ratios = sorted(ratios)
@@ -109,7 +111,7 @@ def test_each_candidates_tally_by_hand():
 
 
 def test_each_row_by_hand():
-    rows = {(r[0], r[1], r[2], r[3]): r for r in _summarise().rows(RESULTS)}
+    rows = {(r[0], r[1], r[2], r[3]): r for r in _script("summarise").rows(RESULTS)}
     for final_path in sorted(RESULTS.rglob("final_eval.json")):
         run = final_path.parent
         config = json.loads((run / "config.json").read_text())
@@ -154,18 +156,10 @@ def test_the_notes_critic_table_is_the_runs_metrics():
             assert row in note
 
 
-def _selection():
-    path = ROOT / "research" / "delivered_policy" / "selection.py"
-    spec = importlib.util.spec_from_file_location("selection", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_a_finished_run_is_exported_once_and_then_skipped(tmp_path, monkeypatch):
     """The queue copies a finished run's result files (not its checkpoints) into --export, and on
     a machine without the run (checkpoints gone) skips it because the copy is there."""
-    module = _selection()
+    module = _script("selection")
     out, export = tmp_path / "runs", tmp_path / "exported"
     source = ROOT / "results" / "table1" / "s3rl_SafetyAntRun-v0" / "seed10"
     job = next(module.jobs(out))
