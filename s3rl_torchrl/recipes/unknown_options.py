@@ -57,12 +57,17 @@ def describe_unknown_option(err: BaseException, command: str) -> str | None:
     prefix = f"{node}." if node else ""
     rest = given[len(prefix) + len(unknown) :].lstrip(".")
     if rest and rest.split(".")[0] in keys:
-        suggestion = prefix + rest  # a key of the other command's config (eval.episodes)
+        suggestions = [prefix + rest]  # a key of the other command's config (eval.episodes)
     else:
-        close = difflib.get_close_matches(unknown, keys, n=1)
-        suggestion = prefix + close[0] + (f".{rest}" if rest else "") if close else None
-    if suggestion is not None:
-        line += f" Did you mean {suggestion}{'' if value is None else '=' + value}?"
+        # A key cut short (algo.alpha) may begin several (alpha_init, alpha_lr): name them all,
+        # where difflib's one closest would choose for the user.
+        close = [k for k in keys if k.startswith(unknown)] or difflib.get_close_matches(
+            unknown, keys, n=1)
+        suggestions = [prefix + k + (f".{rest}" if rest else "") for k in close]
+    if suggestions:
+        options = [s if value is None else f"{s}={value}" for s in suggestions]
+        named = " or ".join(filter(None, [", ".join(options[:-1]), options[-1]]))
+        line += f" Did you mean {named}?"
     return line
 
 

@@ -25,6 +25,10 @@ def fields(schema) -> str:
     return ", ".join(f.name for f in dataclasses.fields(schema))
 
 
+def starting(schema, prefix: str) -> list[str]:
+    return [f.name for f in dataclasses.fields(schema) if f.name.startswith(prefix)]
+
+
 def composition_error(config_name: str, *overrides: str) -> Exception:
     register_configs()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
@@ -50,6 +54,16 @@ def composition_error(config_name: str, *overrides: str) -> Exception:
         ("train", ["sed=3"],
          f"unknown option 'sed': s3rl-x has no 'sed'; its options: {fields(TrainConfig)}. "
          f"Did you mean seed=3?"),
+        # A key cut short that begins several: each of them, in the schema's order.
+        ("train", ["algo=sac", "algo.alpha=1e-5"],
+         f"unknown option 'algo.alpha': algo (SACConfig) has no 'alpha'; its options: "
+         f"{fields(SACConfig)}. Did you mean "
+         + " or ".join(f"algo.{name}=1e-5" for name in starting(SACConfig, "alpha")) + "?"),
+        ("train", ["algo=sac", "algo.lagrangian_=1"],
+         f"unknown option 'algo.lagrangian_': algo (SACConfig) has no 'lagrangian_'; its "
+         f"options: {fields(SACConfig)}. Did you mean "
+         + ", ".join(f"algo.{name}=1" for name in starting(SACConfig, "lagrangian_")[:-1])
+         + f" or algo.{starting(SACConfig, 'lagrangian_')[-1]}=1?"),
         # Nothing close: the options alone.
         ("train", ["algo=sac", "algo.zzz=1"],
          f"unknown option 'algo.zzz': algo (SACConfig) has no 'zzz'; its options: "
