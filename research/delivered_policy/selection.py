@@ -133,6 +133,14 @@ def _export(run_dir: Path, copy: Path | None) -> str:
     return f" -> {copy}"
 
 
+def run_queue(queue, out: Path, export: Path | None, workers: int) -> None:
+    """Run the ``(run_dir, overrides)`` jobs in order, ``workers`` at a time (evidence.py's
+    queue too)."""
+    with ThreadPoolExecutor(workers) as pool:
+        for line in pool.map(lambda job: run(job, out, export), queue):
+            print(line, flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True)
@@ -140,9 +148,7 @@ def main() -> None:
                         help="copy each finished run here; skip the runs copied already")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    with ThreadPoolExecutor(args.workers) as pool:
-        for line in pool.map(lambda job: run(job, args.out, args.export), jobs(args.out)):
-            print(line, flush=True)
+    run_queue(jobs(args.out), args.out, args.export, args.workers)
 
 
 if __name__ == "__main__":

@@ -72,11 +72,22 @@ def test_the_committed_sweeps_are_found():
     assert RETIRED == ["critic_selection_ballrun"]  # algo.cost_gamma
     # The package ships the reference's sweeps (Table 1 under the recommended preset, the
     # paper-settings reproduction), not the research rounds.
-    shipped = {"table1", "reproduction"}
+    shipped = {"table1", "table1_v2", "reproduction"}
     assert {p.stem for p in (config_dir() / "sweep").glob("*.yaml")} == shipped
     assert all(is_research(name) for name in SWEEPS if name not in shipped)
     # Issue 63's runs: four tasks, two algos, three seeds.
     assert len(sweep_jobs("reproduction")) == 24
+    # Issue 60's evidence: one run per committed run of Table 1 (the same algo, task and seed),
+    # which make report pairs it with.
+    committed = {
+        (algo, f"Safety{task}", seed.name)
+        for tree in ("safe_sound", "table1")
+        for seed in (ROOT / "results" / tree).glob("*/seed*")
+        for algo, task in [seed.parent.name.split("_Safety")]
+    }
+    jobs = {(o["algo"], o["task"], f"seed{o['seed']}")
+            for o in (dict(o.split("=", 1) for o in job) for job in sweep_jobs("table1_v2"))}
+    assert len(committed) == 96 and jobs == committed
 
 
 @pytest.mark.parametrize("name", RETIRED)

@@ -180,3 +180,17 @@ def test_a_finished_run_is_exported_once_and_then_skipped(tmp_path, monkeypatch)
     for path in sorted(run_dir.rglob("*"), reverse=True):  # another machine: no run directory
         path.unlink() if path.is_file() else path.rmdir()
     assert module.run(job, out, export) == f"exported already: {copy}"
+
+
+def test_the_evidence_queue_runs_the_shipped_sweeps_jobs_in_its_directories(tmp_path):
+    """evidence.py's first jobs are configs/sweep/table1_v2.yaml's first jobs (the first
+    parameter varies slowest, as Hydra launches them), each in the sweep's subdir under --out."""
+    queue = _script("evidence").jobs(tmp_path)
+    first = [next(queue) for _ in range(4)]
+    expected = [("s3rl", 10), ("s3rl", 20), ("s3rl", 30), ("sac_lag", 10)]
+    for (run_dir, overrides), (algo, seed) in zip(first, expected, strict=True):
+        assert run_dir == tmp_path / f"{algo}_SafetyCarCircle-v0" / f"seed{seed}"
+        assert overrides[:4] == ["experiment=safe", "task=SafetyCarCircle-v0", f"algo={algo}",
+                                 f"seed={seed}"]
+        assert {"eval.delivery_epochs=10", "resume=auto", "threads=1"} <= set(overrides)
+        assert overrides[-1] == f"hydra.run.dir={run_dir}"

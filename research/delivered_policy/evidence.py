@@ -1,0 +1,73 @@
+"""Issue 60's evidence, the shipped sweep `configs/sweep/table1_v2.yaml` (96 runs), as one
+resumable queue that copies each run into version control as it finishes.
+
+    python research/delivered_policy/evidence.py --out runs/table1_v2 --export results/table1_v2
+
+Each job is the sweep's own (the same overrides, one `s3rl-train` run per job in
+`<out>/<algo>_<task>/seed<N>`, the sweep's subdir), two at a time, in the sweep's order. A finished
+run is copied into `--export` (config.json, metrics.csv, final_eval.json, what `make report`
+reads) and a run copied already is skipped, so the queue continues on a machine where `runs/`
+and its checkpoints are gone; an unfinished run resumes from its checkpoint (`resume=auto`).
+The queue itself is selection.py's (`run_queue`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import yaml
+from hydra import compose, initialize_config_dir
+from hydra.core.override_parser.overrides_parser import OverridesParser
+
+from s3rl_torchrl.recipes import config_dir
+from s3rl_torchrl.trainer import register_configs
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
+from selection import run_queue  # noqa: E402
+
+SWEEP = "table1_v2"
+
+
+def sweep_overrides(name: str = SWEEP) -> list[list[str]]:
+    """Each job's overrides, in the order Hydra's sweepers launch them (the first parameter
+    varies slowest)."""
+    params = yaml.safe_load((config_dir() / "sweep" / f"{name}.yaml").read_text())
+    params = params["hydra"]["sweeper"]["params"]
+    jobs: list[list[str]] = [[]]
+    for override in OverridesParser.create().parse_overrides(
+        [f"{key}={value}" for key, value in params.items()]
+    ):
+        key = override.get_key_element()
+        if override.is_sweep_override():
+            values = [f"{key}={v}" for v in override.sweep_string_iterator()]
+        else:
+            values = [f"{key}={override.get_value_element_as_str()}"]
+        jobs = [[*job, value] for job in jobs for value in values]
+    return jobs
+
+
+def jobs(out: Path, name: str = SWEEP):
+    """``(run_dir, overrides)`` per job: the sweep's subdir under ``out``."""
+    register_configs()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        for overrides in sweep_overrides(name):
+            cfg = compose("train", overrides=[f"+sweep={name}", *overrides],
+                          return_hydra_config=True)
+            run_dir = out / cfg.hydra.sweep.subdir
+            yield run_dir, [*overrides, f"hydra.run.dir={run_dir}"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, default=Path("runs") / SWEEP)
+    parser.add_argument("--export", type=Path, default=Path("results") / SWEEP,
+                        help="copy each finished run here; skip the runs copied already")
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    run_queue(list(jobs(args.out)), args.out, args.export, args.workers)
+
+
+if __name__ == "__main__":
+    main()
