@@ -14,8 +14,8 @@ With `--export`, each run is copied there as it finishes (`s3rl-report --export-
 config.json, metrics.csv, final_eval.json), and a run whose copy is there already is skipped:
 checkpoints live only on the machine that wrote them, the copies in version control.
 
-Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, after
-the two of RETIRED_GOAL_CANDIDATES):
+Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, none
+queued since the two of RETIRED_GOAL_CANDIDATES missed and WITHDRAWN_GOAL_CANDIDATES' was withdrawn):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
@@ -54,7 +54,12 @@ RETIRED_GOAL_CANDIDATES = {
 # at this trainer's 0.2 updates per frame: alpha fixed at 1e-5, the actor's rate 5e-6 per frame
 # (2.5e-5 per update), lambda frozen for 200k frames, then 5e-7 per frame (the task's own 3e-6
 # per update already), and its one cost critic without a pessimistic read (the pair's mean).
-GOAL_CANDIDATES = {
+# Withdrawn before any of its runs started: it is the union of the critic selection's round-4
+# candidates (research/2026-11-25-critic-selection.md: A, the mean read; B, OmniSafe's slow actor,
+# fixed alpha and frozen lambda), each of which lost the goal on both seeds at 1M, for the same
+# reason (the training cost never fell below 17.5 while the goal was held), so its four runs
+# (~1.5 h of both cores) would not have told more than those did; the cores go to the evidence.
+WITHDRAWN_GOAL_CANDIDATES = {
     "goal_omnisafe": [
         "algo.auto_alpha=false",
         "algo.alpha_init=1e-5",
@@ -63,6 +68,7 @@ GOAL_CANDIDATES = {
         "algo.cost_critic_read=mean",
     ],
 }
+GOAL_CANDIDATES: dict[str, list[str]] = {}
 FRAMES = 500_000
 # (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
 # results/table1 and results/safe_sound, the largest misses first (the order of a seed's runs).
