@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import pytest
+from omegaconf import OmegaConf
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "research" / "results" / "delivered_selection"
@@ -192,5 +193,21 @@ def test_the_evidence_queue_runs_the_shipped_sweeps_jobs_in_its_directories(tmp_
         assert run_dir == tmp_path / f"{algo}_SafetyCarCircle-v0" / f"seed{seed}"
         assert overrides[:4] == ["experiment=safe", "task=SafetyCarCircle-v0", f"algo={algo}",
                                  f"seed={seed}"]
-        assert {"eval.delivery_epochs=10", "resume=auto", "threads=1"} <= set(overrides)
+        assert {"resume=auto", "threads=1"} <= set(overrides)
         assert overrides[-1] == f"hydra.run.dir={run_dir}"
+
+
+def test_the_preset_is_the_rules_choice():
+    """experiment=safe carries what the last line of selection.md chose: the candidate's
+    overrides (selection.py) and, for the delivered pick, the queue's delivery settings."""
+    from s3rl_torchrl.trainer import validate
+    from tests.conftest import compose_train
+
+    last_line = (ROOT / "research" / "delivered_policy" / "selection.md").read_text().splitlines()[-1]
+    assert last_line.startswith("The rule's choice: margin, delivered pick (14 of 14")
+    composed = compose_train("experiment=safe", "algo=s3rl")
+    selection = _script("selection")
+    for override in (*selection.CANDIDATES["margin"], *selection.DELIVERY):
+        key, value = override.split("=")
+        assert str(OmegaConf.select(composed, key)) == value, override
+    assert validate(composed).algo.lagrangian_eval_window == 0  # aim's window is not part of it
