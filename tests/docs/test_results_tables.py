@@ -300,3 +300,31 @@ def test_update_table1_paired_cell_by_hand(update_table1):
     s3rl = {10: final(11.0), 20: final(22.0), 30: final(33.0)}
     sac_lag = {10: final(10.0), 20: final(20.0), 30: final(30.0)}
     assert update_table1.paired(s3rl, sac_lag, "last") == "+2.00 (p = 0.07) | +0.00 (p undefined)"
+
+
+SELECTION_HEADER = "| candidate | last policy: within the limit | reward kept |"
+SELECTION_RUNS = ROOT / "research" / "results" / "delivered_selection"
+
+
+def test_the_delivered_policy_selection_is_the_selection_runs():
+    # Per candidate, from each selection run's final_eval.json: how many of its last policies and
+    # picks are within the limit, and the median over the runs of reward over Table 1's mean for
+    # the same algo and task (tasks whose mean is above 1, where a ratio means something).
+    rows = {row[0].split(" (")[0].split(",")[0]: row[1:] for row in table_rows(TEXT, SELECTION_HEADER)}
+    assert set(rows) == {"target 0.7", "target 0.8"}
+    for candidate, label in (("margin", "target 0.7"), ("aim", "target 0.8")):
+        cells = []
+        for protocol in ("last", "delivered"):
+            kept, ratios = [], []
+            for final_path in sorted((SELECTION_RUNS / candidate).glob("*/seed*/final_eval.json")):
+                config = json.loads((final_path.parent / "config.json").read_text())
+                final = json.loads(final_path.read_text())
+                result = final if protocol == "last" else final["delivered"]
+                kept.append(result["cost_mean"] <= config["task"]["cost_limit"])
+                task, algo = config["task"]["name"], config["algo"]["name"]
+                reference = statistics.mean(r["reward_mean"] for r in table1_runs(task, algo).values())
+                if reference > 1.0:
+                    ratios.append(result["reward_mean"] / reference)
+            assert len(kept) == 14
+            cells += [f"{sum(kept)} of {len(kept)}", f"{statistics.median(ratios):.2f}"]
+        assert rows[label] == cells, candidate
