@@ -115,6 +115,10 @@ def _finals(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
 def _evaluation(run: Run, protocol: str) -> dict | None:
     if run.final is None:
         return None
+    if protocol == "delivered" and not run.config.get("eval", {}).get("delivery_epochs"):
+        # A run without eval.delivery_epochs picked nothing: it delivered its last policy, which
+        # is what a preset before the pick is compared on.
+        return run.final
     return run.final if protocol == "last" else run.final.get(protocol)
 
 
@@ -130,7 +134,8 @@ def before_after(
     """Pair the runs of ``before`` and ``after`` (result trees) by task, algo and seed.
 
     Args:
-        protocol: ``last`` (the policy at the end of training) or ``best_feasible``.
+        protocol: ``last`` (the policy at the end of training), ``best_feasible`` or ``delivered``
+            (eval.delivery_epochs' pick; a run without the pick delivered its last policy).
         within_target: per algo, the runs (of those paired) that must be within the limit
             under the new preset; default: all of them.
         reward_kept: the share of the old mean reward the new preset must keep on every task
@@ -204,6 +209,9 @@ def write_markdown(result: BeforeAfter, path: str | Path, command: str = "") -> 
     lines = [f"# Before / after: {PROTOCOLS[result.protocol]}", ""]
     if command:
         lines += [f"Written by `{command}`.", ""]
+    if result.protocol == "delivered":
+        lines += ["A run without `eval.delivery_epochs` picked nothing: it is read as it was "
+                  "delivered, by its last policy.", ""]
     lines += ["| target | value | met |", "|---|---|---|"]
     lines += [f"| {t.name} | {t.value} | {'yes' if t.met else 'no'} |" for t in result.targets]
     lines += [

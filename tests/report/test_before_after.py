@@ -101,3 +101,29 @@ def test_cli_writes_the_page_and_the_json(trees, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["before-after", "--before", str(before), "--after", str(after), "--out",
               str(out), "--task-target", "bad"])
+
+
+def test_the_delivered_protocol_reads_a_run_without_a_pick_as_its_last_policy(tmp_path, make_run):
+    # Before: no pick (eval.delivery_epochs absent or 0): each run delivered its last policy.
+    # After: eval.delivery_epochs=10; final_eval.json's `delivered` is the pick's evaluation.
+    before, after = tmp_path / "before", tmp_path / "after"
+    make_run(before / "seed10", TASK, "sac_lag", 10, episodes(100, 30))
+    make_run(before / "seed20", TASK, "sac_lag", 20, episodes(120, 5), eval__delivery_epochs=0)
+    for seed, last, pick in ((10, (90, 12), (95, 6)), (20, (110, 14), (105, 4))):
+        run = make_run(after / f"seed{seed}", TASK, "sac_lag", seed, episodes(*last),
+                       eval__delivery_epochs=10)
+        final = json.loads((run / "final_eval.json").read_text())
+        final["delivered"] = {"reward_mean": float(pick[0]), "cost_mean": float(pick[1])}
+        (run / "final_eval.json").write_text(json.dumps(final))
+    # A run that was to pick (delivery_epochs > 0) but has no pick is not read as its last.
+    make_run(before / "seed30", TASK, "sac_lag", 30, episodes(1, 1), eval__delivery_epochs=5)
+    make_run(after / "seed30", TASK, "sac_lag", 30, episodes(1, 1), eval__delivery_epochs=10)
+
+    def pairs(protocol):
+        (row,) = before_after([before], [after], protocol).rows
+        return [(p.seed, p.before_reward, p.before_cost, p.after_reward, p.after_cost)
+                for p in row.pairs]
+
+    assert pairs("delivered") == [(10, 100, 30, 95, 6), (20, 120, 5, 105, 4)]
+    assert before_after([before], [after], "delivered").unpaired == [f"{TASK} sac_lag seed 30"]
+    assert pairs("last") == [(10, 100, 30, 90, 12), (20, 120, 5, 110, 14), (30, 1, 1, 1, 1)]
