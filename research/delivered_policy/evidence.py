@@ -49,7 +49,8 @@ def sweep_overrides(name: str = SWEEP) -> list[list[str]]:
 
 
 def jobs(out: Path, name: str = SWEEP):
-    """``(run_dir, overrides)`` per job: the sweep's subdir under ``out``."""
+    """``(run_dir, overrides)`` per job: the sweep's subdir under ``out``. Hydra's global
+    config directory is held until the generator is exhausted or closed."""
     register_configs()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         for overrides in sweep_overrides(name):

@@ -3,6 +3,7 @@ runs (research/results/delivered_selection), recomputed here from their files by
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib.util
 import json
@@ -186,8 +187,9 @@ def test_a_finished_run_is_exported_once_and_then_skipped(tmp_path, monkeypatch)
 def test_the_evidence_queue_runs_the_shipped_sweeps_jobs_in_its_directories(tmp_path):
     """evidence.py's first jobs are configs/sweep/table1_v2.yaml's first jobs (the first
     parameter varies slowest, as Hydra launches them), each in the sweep's subdir under --out."""
-    queue = _script("evidence").jobs(tmp_path)
-    first = [next(queue) for _ in range(4)]
+    # Closed after four jobs: the generator holds Hydra's global config directory until then.
+    with contextlib.closing(_script("evidence").jobs(tmp_path)) as queue:
+        first = [next(queue) for _ in range(4)]
     expected = [("s3rl", 10), ("s3rl", 20), ("s3rl", 30), ("sac_lag", 10)]
     for (run_dir, overrides), (algo, seed) in zip(first, expected, strict=True):
         assert run_dir == tmp_path / f"{algo}_SafetyCarCircle-v0" / f"seed{seed}"
