@@ -19,9 +19,9 @@ from pathlib import Path
 
 import yaml
 from hydra import compose, initialize_config_dir
-from hydra.core.override_parser.overrides_parser import OverridesParser
 
 from s3rl_torchrl.recipes import config_dir
+from s3rl_torchrl.recipes.launch_checks import sweep_overrides as expand_sweep
 from s3rl_torchrl.trainer import register_configs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
@@ -31,21 +31,10 @@ SWEEP = "table1_v2"
 
 
 def sweep_overrides(name: str = SWEEP) -> list[list[str]]:
-    """Each job's overrides, in the order Hydra's sweepers launch them (the first parameter
-    varies slowest)."""
+    """Each job's overrides, in the order Hydra's basic sweeper launches them."""
     params = yaml.safe_load((config_dir() / "sweep" / f"{name}.yaml").read_text())
     params = params["hydra"]["sweeper"]["params"]
-    jobs: list[list[str]] = [[]]
-    for override in OverridesParser.create().parse_overrides(
-        [f"{key}={value}" for key, value in params.items()]
-    ):
-        key = override.get_key_element()
-        if override.is_sweep_override():
-            values = [f"{key}={v}" for v in override.sweep_string_iterator()]
-        else:
-            values = [f"{key}={override.get_value_element_as_str()}"]
-        jobs = [[*job, value] for job in jobs for value in values]
-    return jobs
+    return expand_sweep(f"{key}={value}" for key, value in params.items())
 
 
 def jobs(out: Path, name: str = SWEEP):

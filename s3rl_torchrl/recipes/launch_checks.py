@@ -24,7 +24,7 @@ from __future__ import annotations
 import copy
 import shutil
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -34,7 +34,7 @@ from omegaconf import DictConfig, open_dict, read_write
 from s3rl_torchrl.recipes.unknown_options import describe_unknown_option
 from s3rl_torchrl.trainer.run_lock import LOCK_FILE, RunInUseError, RunLock
 
-__all__ = ["RUN_FILES", "LaunchChecks", "job_problem"]
+__all__ = ["RUN_FILES", "LaunchChecks", "job_problem", "sweep_overrides"]
 
 # What a run writes at its directory's top level (trainer/loop.py, multiseed.py): a directory
 # holding one of them holds a run.
@@ -164,9 +164,7 @@ def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
     """Every job of the sweep, as the basic sweeper splits it and the launcher composes it:
     ``(its overrides, why the recipe would refuse it or None)``. None for another sweeper
     (e.g. Optuna's, whose jobs are chosen as it goes)."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
 
     if str(config.hydra.sweeper.get("_target_", "")) != BASIC_SWEEPER:
         return None
@@ -174,10 +172,8 @@ def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
     params = config.hydra.sweeper.get("params") or {}
     arguments = [f"{key}={value}" for key, value in params.items()]
     arguments += list(config.hydra.overrides.task)
-    parser = OverridesParser.create(config_loader=loader)
-    batches = BasicSweeper.split_arguments(parser.parse_overrides(arguments), None)
     jobs = []
-    for overrides in (job for batch in batches for job in batch):
+    for overrides in sweep_overrides(arguments, loader):
         try:
             job_config = loader.load_sweep_config(config, list(overrides))
         except Exception as err:  # a value of the wrong type, an unknown key: Hydra's message
@@ -186,3 +182,16 @@ def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
             continue
         jobs.append((list(overrides), job_problem(job_config)))
     return jobs
+
+
+def sweep_overrides(arguments: Iterable[str], config_loader: Any = None) -> list[list[str]]:
+    """Each job's overrides, as Hydra's basic sweeper expands ``arguments`` (``key=value``
+    strings: a sweep's ``params`` then the command line's): one list per job, in launch order,
+    the first key varying slowest. Hydra's own expansion, so that what a check or a queue
+    (research/delivered_policy/evidence.py) reads is what ``--multirun`` launches."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create(config_loader=config_loader)
+    batches = BasicSweeper.split_arguments(parser.parse_overrides(list(arguments)), None)
+    return [list(job) for batch in batches for job in batch]

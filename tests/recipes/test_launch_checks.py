@@ -207,6 +207,20 @@ def test_a_valid_sweep_passes(tmp_path):
     assert len(jobs) == 4 and all(problem is None for _, problem in jobs)
 
 
+def test_a_sweeps_jobs_are_its_parameters_product_the_first_varying_slowest():
+    # Written out by hand: what `--multirun task=a,b algo=s3rl,sac_lag seed=range(10,31,10)`
+    # launches, with a fixed override kept in every job and a repeated key taking its place.
+    jobs = checks.sweep_overrides(
+        ["task=a,b", "eval.delivery_epochs=10", "algo=s3rl,sac_lag", "seed=range(10,31,10)",
+         "eval.delivery_epochs=0"]
+    )
+    expected = [
+        [f"task={task}", "eval.delivery_epochs=0", f"algo={algo}", f"seed={seed}"]
+        for task in ("a", "b") for algo in ("s3rl", "sac_lag") for seed in (10, 20, 30)
+    ]
+    assert jobs == expected
+
+
 def test_slurm_without_slurm_is_one_line(tmp_path, capsys, monkeypatch):
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
     monkeypatch.setattr(checks.shutil, "which", lambda name: None)

@@ -7,16 +7,15 @@ not after the first jobs have trained)."""
 from __future__ import annotations
 
 import functools
-import itertools
 from pathlib import Path
 
 import pytest
 import yaml
-from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import OmegaConf, open_dict
 
 from s3rl_torchrl.algorithms.config import REMOVED_OPTIONS
 from s3rl_torchrl.recipes import config_dir
+from s3rl_torchrl.recipes.launch_checks import sweep_overrides
 from s3rl_torchrl.trainer import validate
 from tests.conftest import compose_train
 
@@ -53,17 +52,9 @@ def is_research(name: str) -> bool:
 
 def sweep_jobs(name: str) -> list[list[str]]:
     """Each job's overrides, expanded the way Hydra's basic sweeper expands ``params``."""
-    params = sweep_params(name)
-    parser = OverridesParser.create()
-    choices = []
-    for override in parser.parse_overrides([f"{key}={value}" for key, value in params.items()]):
-        key = override.get_key_element()
-        if override.is_sweep_override():
-            choices.append([f"{key}={v}" for v in override.sweep_string_iterator()])
-        else:
-            choices.append([f"{key}={override.get_value_element_as_str()}"])
+    arguments = [f"{key}={value}" for key, value in sweep_params(name).items()]
     first = [SEARCHPATH] if is_research(name) else []
-    return [[*first, f"+sweep={name}", *job] for job in itertools.product(*choices)]
+    return [[*first, f"+sweep={name}", *job] for job in sweep_overrides(arguments)]
 
 
 def test_the_committed_sweeps_are_found():
