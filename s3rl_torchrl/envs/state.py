@@ -65,8 +65,10 @@ def exact_restore_unsupported(env: EnvBase) -> str | None:
     for copy in copies:
         unwrapped = copy.unwrapped
         if not isinstance(getattr(unwrapped, "data", None), mujoco.MjData):
+            # The task's id (bullet-safety-gym's class is EnvironmentBuilder for every task).
+            name = copy.spec.id.rpartition("/")[2] if copy.spec else type(unwrapped).__name__
             return (
-                f"{type(unwrapped).__name__} is not a MuJoCo env (pybullet keeps its simulator "
+                f"{name} is not a MuJoCo env (pybullet keeps its simulator "
                 "state in its physics server, which cannot be saved and restored exactly)"
             )
     return None
