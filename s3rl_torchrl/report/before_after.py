@@ -87,7 +87,9 @@ class BeforeAfter:
     protocol: str
     rows: list[TaskRow]
     targets: list[Target]
-    unpaired: list[str]  # (task, algo, seed) found on one side only, or unfinished
+    # (task, algo, seed, why): 'before only' / 'after only' (no run on the other side),
+    # 'unfinished' (a side's run has no evaluation for the protocol)
+    unpaired: list[tuple[str, str, int, str]]
 
     def within(self, algo: str, side: str) -> tuple[int, int]:
         rows = [r for r in self.rows if r.algo == algo]
@@ -153,7 +155,9 @@ def before_after(
         a = _evaluation(old[key], protocol) if key in old else None
         b = _evaluation(new[key], protocol) if key in new else None
         if a is None or b is None:
-            unpaired.append(f"{key[0]} {key[1]} seed {key[2]}")
+            why = ("after only" if key not in old else "before only" if key not in new
+                   else "unfinished")
+            unpaired.append((*key, why))
             continue
         if old[key].cost_limit != new[key].cost_limit:
             raise ReportError(
@@ -233,8 +237,16 @@ def write_markdown(result: BeforeAfter, path: str | Path, command: str = "") -> 
             f"| {_cell(row.reward_test)} | {_cell(row.cost_test)} |"
         )
     if result.unpaired:
-        lines += ["", "Not paired (on one side only, or unfinished): "
-                  + "; ".join(result.unpaired) + "."]
+        lines += ["", f"Not paired ({len(result.unpaired)} runs), by task and algo with their seeds:",
+                  ""]
+        for why in ("before only", "after only", "unfinished"):
+            seeds: dict[tuple[str, str], list[str]] = {}
+            for task, algo, seed, reason in result.unpaired:
+                if reason == why:
+                    seeds.setdefault((task, algo), []).append(str(seed))
+            if seeds:
+                lines.append(f"- {why}: " + "; ".join(
+                    f"{task} {algo} {', '.join(s)}" for (task, algo), s in seeds.items()) + ".")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")

@@ -54,7 +54,7 @@ def test_pairs_by_seed_and_counts_runs_within_the_limit(trees):
     s3rl = next(r for r in result.rows if r.algo == "s3rl")
     assert [p.seed for p in s3rl.pairs] == [10]
     assert math.isnan(s3rl.cost_test.pvalue)  # one pair: no test
-    assert result.unpaired == [f"{TASK} s3rl seed 20", f"{TASK} s3rl seed 30"]
+    assert result.unpaired == [(TASK, "s3rl", 20, "unfinished"), (TASK, "s3rl", 30, "after only")]
     targets = {t.name.split(":")[0]: t for t in result.targets}
     assert targets["sac_lag"].met and targets["s3rl"].met  # 3 of 3; s3rl: 1 of 1 by default
     # Reward kept only where the old mean cost was within the limit: s3rl (5 <= 10), 40 / 50.
@@ -93,8 +93,15 @@ def test_cli_writes_the_page_and_the_json(trees, tmp_path, capsys):
     page = out.read_text()
     assert "| sac_lag: runs within the limit (after; before 1 of 3) | 3 of 3 (target >= 2) | yes |" \
         in page
+    assert "- unfinished: SafetyHalfCheetahVelocity-v1 s3rl 20." in page
+    assert "- after only: SafetyHalfCheetahVelocity-v1 s3rl 30." in page
     data = json.loads(record.read_text())
     assert [r["within_after"] for r in data["rows"]] == [1, 3]  # s3rl, sac_lag (sorted)
+    assert data["unpaired"] == [[TASK, "s3rl", 20, "unfinished"], [TASK, "s3rl", 30, "after only"]]
+    # The other way round, seed 30 is on the old side only.
+    assert main(["before-after", "--before", str(after), "--after", str(before),
+                 "--out", str(out)]) == 0
+    assert "- before only: SafetyHalfCheetahVelocity-v1 s3rl 30." in out.read_text()
     assert main(["before-after", "--before", str(before), "--after", str(tmp_path / "none"),
                  "--out", str(out)]) == 2
     assert "is not a directory" in capsys.readouterr().err
@@ -125,5 +132,5 @@ def test_the_delivered_protocol_reads_a_run_without_a_pick_as_its_last_policy(tm
                 for p in row.pairs]
 
     assert pairs("delivered") == [(10, 100, 30, 95, 6), (20, 120, 5, 105, 4)]
-    assert before_after([before], [after], "delivered").unpaired == [f"{TASK} sac_lag seed 30"]
+    assert before_after([before], [after], "delivered").unpaired == [(TASK, "sac_lag", 30, "unfinished")]
     assert pairs("last") == [(10, 100, 30, 90, 12), (20, 120, 5, 110, 14), (30, 1, 1, 1, 1)]
