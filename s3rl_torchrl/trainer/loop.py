@@ -100,6 +100,7 @@ CONTRASTIVE_DIAGNOSTICS = (
     "mi_lower_bound",
 )
 BEST_CHECKPOINT = "best"  # checkpoints/best: FSRL's best-feasible policy (evaluation.BestFeasible)
+DELIVERED_CHECKPOINT = "delivered"  # checkpoints/delivered: eval.delivery_epochs' pick
 
 
 @dataclass
@@ -589,7 +590,8 @@ class Trainer:
             ] = best
             saved["best_feasible"] = {**best.to_dict(), **asdict(self.best), "feasible": feasible}
         if self.delivery is not None and self.delivery.candidates:
-            delivered, record = self._delivered_evaluation(episodes, max_steps)
+            delivered, record, policy = self._delivered_evaluation(episodes, max_steps)
+            self._save_delivered(policy, record)
             rows[
                 f"delivered policy (epoch {record['epoch']}, {record['frames']} frames; picked "
                 f"among the last {len(record['candidates'])} epochs' policies)"
@@ -608,10 +610,11 @@ class Trainer:
 
     def _delivered_evaluation(
         self, episodes: int, max_steps: int | None
-    ) -> tuple[EvalResult, dict[str, Any]]:
+    ) -> tuple[EvalResult, dict[str, Any], torch.nn.Module]:
         """``eval.delivery_epochs``: each kept policy evaluated on ``eval.delivery_episodes``
         fresh episodes, the pick (:func:`pick_delivered`) evaluated again on ``episodes``
-        others, so that the reported numbers are not those it was picked on."""
+        others, so that the reported numbers are not those it was picked on. Returns that
+        evaluation, its record (``final_eval.json``'s ``delivered``) and the picked policy."""
         cfg = self.cfg
         limit = cfg.eval.delivery_cost_share * cfg.task.cost_limit
         candidates, policies, results = [], [], []
@@ -632,7 +635,7 @@ class Trainer:
                 for c, r in zip(candidates, results, strict=True)
             ],
         }
-        return delivered, record
+        return delivered, record, policies[index]
 
     def _interrupted(self, progress) -> TrainResult:
         self.save()
@@ -695,6 +698,25 @@ class Trainer:
             self.run_dir / "checkpoints" / BEST_CHECKPOINT,
             {key: state[key] for key in ("config", "counters", "loss", "best_feasible")},
         )
+
+    def _save_delivered(self, policy: torch.nn.Module, record: dict[str, Any]) -> Path:
+        """The pick as a checkpoint of its own (``checkpoints/delivered``: weights and config,
+        no buffer), so that ``s3rl-eval checkpoint=<run>/checkpoints/delivered`` (a video, more
+        episodes) evaluates what the run delivered. Its loss holds the pick's actor and the last
+        epoch's critics (an evaluation reads only the actor); the run's own networks are left as
+        they were."""
+        actor = self.agent.actor
+        last = {key: value.detach().clone() for key, value in actor.state_dict().items()}
+        actor.load_state_dict(policy.state_dict())  # in place: the loss's actor parameters
+        try:
+            return save_checkpoint(
+                self.run_dir / "checkpoints" / DELIVERED_CHECKPOINT,
+                {"config": to_container(self.cfg), "counters": dict(vars(self.counters)),
+                 "loss": self.agent.loss.state_dict(),
+                 "delivered": {k: v for k, v in record.items() if k != "candidates"}},
+            )
+        finally:
+            actor.load_state_dict(last)
 
     def save(self) -> Path:
         return save_checkpoint(

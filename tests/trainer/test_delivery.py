@@ -8,7 +8,9 @@ import json
 import pytest
 import torch
 
-from s3rl_torchrl.trainer import Trainer, train
+from s3rl_torchrl.trainer import Trainer, loop, train
+from s3rl_torchrl.trainer.checkpoint import load_checkpoint
+from s3rl_torchrl.trainer.evaluate_checkpoint import load_policy
 from s3rl_torchrl.trainer.evaluation import DeliveryCandidates, EvalResult, pick_delivered
 
 
@@ -86,3 +88,28 @@ def test_resume_keeps_the_candidates(tiny_config, tmp_path):
     assert [c["epoch"] for c in restored] == [1, 2]
     for a, b in zip(kept, restored, strict=True):
         assert all(torch.equal(a["weights"][k], b["weights"][k]) for k in a["weights"])
+
+
+def test_the_pick_is_a_checkpoint_s3rl_eval_loads(tiny_config, tmp_path, monkeypatch):
+    # checkpoints/delivered holds the picked candidate's actor, as s3rl-eval loads it; the run's
+    # own actor is still the last policy afterwards. The older candidate is picked (the rule is
+    # tested above), so that the pick's weights are not the last policy's.
+    monkeypatch.setattr(loop, "pick_delivered", lambda results, limit: (0, True))
+    cfg = tiny_config("algo=sac_lag", "collector.total_frames=600", "eval.random_baseline=false",
+                      "eval.final_episodes=2", "eval.delivery_epochs=2",
+                      "eval.delivery_episodes=2")
+    trainer = Trainer(cfg, tmp_path / "run")
+    trainer.run()
+    candidates = {c["epoch"]: c["weights"] for c in trainer.delivery.state_dict()["candidates"]}
+    first, last = sorted(candidates)
+    assert any(not torch.equal(candidates[first][k], candidates[last][k]) for k in candidates[last])
+    delivered = json.loads((tmp_path / "run" / "final_eval.json").read_text())["delivered"]
+    assert delivered["epoch"] == first
+    actor, saved_cfg = load_policy(tmp_path / "run" / "checkpoints" / "delivered")
+    assert saved_cfg.eval.delivery_epochs == 2
+    weights = actor.state_dict()
+    assert all(torch.equal(weights[k], candidates[delivered["epoch"]][k]) for k in weights)
+    own = trainer.agent.actor.state_dict()
+    assert all(torch.equal(own[k], candidates[last][k]) for k in own)
+    state, _ = load_checkpoint(tmp_path / "run" / "checkpoints" / "delivered")
+    assert state["delivered"]["epoch"] == delivered["epoch"]
