@@ -594,7 +594,8 @@ class Trainer:
             self._save_delivered(policy, record)
             rows[
                 f"delivered policy (epoch {record['epoch']}, {record['frames']} frames; picked "
-                f"among the last {len(record['candidates'])} epochs' policies)"
+                f"among the last {len(record['candidates'])} epochs' policies; "
+                f"checkpoints/{DELIVERED_CHECKPOINT})"
             ] = delivered
             saved["delivered"] = {**delivered.to_dict(), **record}
         Path(self.run_dir / FINAL_EVAL_FILE).write_text(json.dumps(saved, indent=2) + "\n")
