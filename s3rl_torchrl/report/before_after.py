@@ -26,7 +26,9 @@ import numpy as np
 from s3rl_torchrl.report.runs import PROTOCOLS, ReportError, Run, find_runs
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
 
-__all__ = ["BeforeAfter", "SeedPair", "Target", "TaskRow", "before_after", "write_markdown"]
+__all__ = [
+    "BeforeAfter", "Miss", "SeedPair", "Target", "TaskRow", "before_after", "write_markdown"
+]
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,50 @@ class TaskRow:
 
 
 @dataclass(frozen=True)
+class Miss:
+    """A run over its limit under the new preset, with what its own files say about why: the
+    training cost the multiplier held (``train/cost`` over the last 20% of epochs) and, for a
+    run that picked its policy (``eval.delivery_epochs``), what the pick saw."""
+
+    task: str
+    algo: str
+    seed: int
+    cost: float  # the reported (protocol's) mean cost
+    cost_limit: float
+    training_cost: float
+    pick_cost: float | None = None  # the pick's cost on its picking episodes
+    candidates_within: int | None = None  # kept policies within the pick's limit
+    candidates: int | None = None
+
+    @property
+    def reason(self) -> str:
+        held = f"training cost {self.training_cost:.1f} over the last 20% of epochs"
+        if self.candidates is None:
+            return held
+        if not self.candidates_within:
+            return (f"none of the {self.candidates} kept policies was within the limit on its "
+                    f"picking episodes (the cheapest: {self.pick_cost:.1f}); {held}")
+        return (f"picked at {self.pick_cost:.1f} on its picking episodes ({self.candidates_within}"
+                f" of {self.candidates} within), {self.cost:.1f} on the reported ones; {held}")
+
+
+def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
+    costs = [row.get("train/cost", math.nan) for row in run.metrics]
+    tail = [c for c in costs[-max(1, round(0.2 * len(costs))):] if not math.isnan(c)]
+    miss = Miss(run.task, run.algo, run.seed, float(evaluation["cost_mean"]), run.cost_limit,
+                float(np.mean(tail)) if tail else math.nan)
+    record = run.final.get("delivered") if protocol == "delivered" else None
+    if record is not None and _evaluation(run, protocol) is record:
+        candidates = record.get("candidates", [])
+        picked = next((c for c in candidates if c["epoch"] == record["epoch"]), None)
+        within = sum(c["cost"] <= record["pick_cost_limit"] for c in candidates)
+        miss = Miss(miss.task, miss.algo, miss.seed, miss.cost, miss.cost_limit,
+                    miss.training_cost, picked["cost"] if picked else math.nan, within,
+                    len(candidates))
+    return miss
+
+
+@dataclass(frozen=True)
 class Target:
     """One question about the new preset, with the numbers that answer it."""
 
@@ -90,6 +136,7 @@ class BeforeAfter:
     # (task, algo, seed, why): 'before only' / 'after only' (no run on the other side),
     # 'unfinished' (a side's run has no evaluation for the protocol)
     unpaired: list[tuple[str, str, int, str]]
+    misses: list[Miss] = field(default_factory=list)  # paired runs over the limit after
 
     def within(self, algo: str, side: str) -> tuple[int, int]:
         rows = [r for r in self.rows if r.algo == algo]
@@ -150,7 +197,7 @@ def before_after(
     old, new = _finals(before), _finals(after)
     paired: dict[tuple[str, str], list[SeedPair]] = {}
     limits: dict[tuple[str, str], float] = {}
-    unpaired = []
+    unpaired, misses = [], []
     for key in sorted(set(old) | set(new)):
         a = _evaluation(old[key], protocol) if key in old else None
         b = _evaluation(new[key], protocol) if key in new else None
@@ -169,13 +216,15 @@ def before_after(
                      float(b["reward_mean"]), float(b["cost_mean"]))
         )
         limits[key[:2]] = new[key].cost_limit
+        if float(b["cost_mean"]) > new[key].cost_limit:
+            misses.append(_miss(new[key], b, protocol))
     if not paired:
         raise ReportError(
             "No task, algo and seed has a finished run on both sides: nothing to compare."
         )
     rows = [TaskRow(task, algo, limits[task, algo], pairs)
             for (task, algo), pairs in sorted(paired.items())]
-    result = BeforeAfter(protocol, rows, [], unpaired)
+    result = BeforeAfter(protocol, rows, [], unpaired, misses)
 
     for algo in result.algos:
         within, total = result.within(algo, "after")
@@ -236,6 +285,11 @@ def write_markdown(result: BeforeAfter, path: str | Path, command: str = "") -> 
             f"| {row.within('before')}/{n} | {row.within('after')}/{n} "
             f"| {_cell(row.reward_test)} | {_cell(row.cost_test)} |"
         )
+    if result.misses:
+        lines += ["", "Runs over the limit after, and what their files say:", "",
+                  "| task | algo | seed | cost (limit) | what the run shows |", "|---|---|---|---|---|"]
+        lines += [f"| {m.task} | {m.algo} | {m.seed} | {m.cost:.1f} ({m.cost_limit:g}) | {m.reason} |"
+                  for m in result.misses]
     if result.unpaired:
         lines += ["", f"Not paired ({len(result.unpaired)} runs), by task and algo with their seeds:",
                   ""]

@@ -232,7 +232,9 @@ def before_after_main(argv: Sequence[str]) -> int:
                  "within_after": row.within("after")} for row in result.rows]
         write_json(args.json, {"protocol": result.protocol, "rows": rows,
                                "targets": [asdict(t) for t in result.targets],
-                               "unpaired": result.unpaired}, command)
+                               "unpaired": result.unpaired,
+                               "misses": [{**asdict(m), "reason": m.reason}
+                                          for m in result.misses]}, command)
     return 0
 
 

@@ -134,3 +134,41 @@ def test_the_delivered_protocol_reads_a_run_without_a_pick_as_its_last_policy(tm
     assert pairs("delivered") == [(10, 100, 30, 95, 6), (20, 120, 5, 105, 4)]
     assert before_after([before], [after], "delivered").unpaired == [(TASK, "sac_lag", 30, "unfinished")]
     assert pairs("last") == [(10, 100, 30, 90, 12), (20, 120, 5, 110, 14), (30, 1, 1, 1, 1)]
+
+
+def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run):
+    # After (limit 10): seed 10's pick was within the limit on its picking episodes (candidates
+    # at costs 4 and 30: 1 of 2 within) but costs 14 on the reported ones; seed 20 kept no
+    # policy within (candidates 18, 12: the cheapest picked); seed 30 is within (no row).
+    # Training cost: 10 epochs, the last 20% (2 epochs) at 9 and 11 -> 10.0.
+    before, after = tmp_path / "before", tmp_path / "after"
+    curve = {"frames": list(range(100, 1100, 100)), "train/cost": [50.0] * 8 + [9.0, 11.0]}
+    picks = {10: (14, 9, [(9, 4.0), (10, 30.0)]), 20: (13, 10, [(9, 18.0), (10, 12.0)]),
+             30: (3, 10, [(9, 3.0), (10, 2.0)])}
+    for seed, (cost, epoch, candidates) in picks.items():
+        make_run(before / f"seed{seed}", TASK, "sac_lag", seed, episodes(100, 20))
+        run = make_run(after / f"seed{seed}", TASK, "sac_lag", seed, episodes(100, 20),
+                       curve=curve, eval__delivery_epochs=2)
+        final = json.loads((run / "final_eval.json").read_text())
+        final["delivered"] = {"reward_mean": 90.0, "cost_mean": float(cost),
+                              "epoch": epoch, "pick_cost_limit": 10.0,
+                              "candidates": [{"epoch": e, "frames": 100 * e, "reward": 1.0,
+                                              "cost": c} for e, c in candidates]}
+        (run / "final_eval.json").write_text(json.dumps(final))
+    misses = before_after([before], [after], "delivered").misses
+    assert [(m.seed, m.cost, m.training_cost, m.pick_cost, m.candidates_within, m.candidates)
+            for m in misses] == [(10, 14, 10.0, 4.0, 1, 2), (20, 13, 10.0, 12.0, 0, 2)]
+    assert misses[0].reason.startswith("picked at 4.0 on its picking episodes (1 of 2 within), "
+                                       "14.0 on the reported ones")
+    assert misses[1].reason.startswith("none of the 2 kept policies was within the limit")
+    # The last policies (cost 20 each, all over): the training cost only.
+    last = before_after([before], [after], "last").misses
+    assert [m.seed for m in last] == [10, 20, 30] and last[0].pick_cost is None
+    assert last[0].reason == "training cost 10.0 over the last 20% of epochs"
+    out, record = tmp_path / "page.md", tmp_path / "page.json"
+    assert main(["before-after", "--before", str(before), "--after", str(after),
+                 "--protocol", "delivered", "--out", str(out), "--json", str(record)]) == 0
+    assert f"| {TASK} | sac_lag | 20 | 13.0 (10) | none of the 2 kept" in out.read_text()
+    saved = json.loads(record.read_text())["misses"]
+    assert [(m["seed"], m["candidates_within"]) for m in saved] == [(10, 1), (20, 0)]
+    assert saved[1]["reason"] == misses[1].reason
