@@ -1,7 +1,9 @@
 """Issue 60's evidence, the shipped sweep `configs/sweep/table1_v2.yaml` (96 runs), as one
-resumable queue that copies each run into version control as it finishes.
+resumable queue that copies each run into version control as it finishes; `--sweep` runs another
+shipped sweep the same way (issue 63's `reproduction` into results/reproduction).
 
     python research/delivered_policy/evidence.py --out runs/table1_v2 --export results/table1_v2
+    python research/delivered_policy/evidence.py --sweep reproduction
 
 Each job is the sweep's own (the same overrides, one `s3rl-train` run per job in
 `<out>/<algo>_<task>/seed<N>`, the sweep's subdir), two at a time, in the sweep's order. A finished
@@ -51,12 +53,18 @@ def jobs(out: Path, name: str = SWEEP):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("runs") / SWEEP)
-    parser.add_argument("--export", type=Path, default=Path("results") / SWEEP,
-                        help="copy each finished run here; skip the runs copied already")
+    shipped = sorted(p.stem for p in (config_dir() / "sweep").glob("*.yaml"))
+    parser.add_argument("--sweep", choices=shipped, default=SWEEP,
+                        help=f"a shipped sweep, configs/sweep/<name>.yaml (default: {SWEEP})")
+    parser.add_argument("--out", type=Path, help="the runs (default: runs/<sweep>)")
+    parser.add_argument("--export", type=Path,
+                        help="copy each finished run here and skip the runs copied already "
+                        "(default: results/<sweep>)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    run_queue(list(jobs(args.out)), args.out, args.export, args.workers)
+    out = args.out or Path("runs") / args.sweep
+    export = args.export or Path("results") / args.sweep
+    run_queue(list(jobs(out, args.sweep)), out, export, args.workers)
 
 
 if __name__ == "__main__":

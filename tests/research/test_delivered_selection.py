@@ -197,6 +197,12 @@ def test_the_evidence_queue_runs_the_shipped_sweeps_jobs_in_its_directories(tmp_
                                  f"seed={seed}"]
         assert {"resume=auto", "threads=1"} <= set(overrides)
         assert overrides[-1] == f"hydra.run.dir={run_dir}"
+    # The reproduction (issue 63) through the same queue: experiment=paper, its first task.
+    with contextlib.closing(_script("evidence").jobs(tmp_path, "reproduction")) as queue:
+        run_dir, overrides = next(queue)
+    assert run_dir == tmp_path / "s3rl_SafetyAntVelocity-v1" / "seed10"
+    assert overrides[:4] == ["experiment=paper", "task=SafetyAntVelocity-v1", "algo=s3rl",
+                             "seed=10"]
 
 
 def test_the_preset_is_the_rules_choice():
