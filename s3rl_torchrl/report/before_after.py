@@ -106,17 +106,17 @@ class Miss:
 def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
     costs = [row.get("train/cost", math.nan) for row in run.metrics]
     tail = [c for c in costs[-max(1, round(0.2 * len(costs))):] if not math.isnan(c)]
-    miss = Miss(run.task, run.algo, run.seed, float(evaluation["cost_mean"]), run.cost_limit,
-                float(np.mean(tail)) if tail else math.nan)
-    record = run.final.get("delivered") if protocol == "delivered" else None
-    if record is not None and _evaluation(run, protocol) is record:
+    training_cost = float(np.mean(tail)) if tail else math.nan
+    picked = {}
+    record = run.final.get("delivered")
+    if protocol == "delivered" and record is not None and evaluation is record:
         candidates = record.get("candidates", [])
-        picked = next((c for c in candidates if c["epoch"] == record["epoch"]), None)
-        within = sum(c["cost"] <= record["pick_cost_limit"] for c in candidates)
-        miss = Miss(miss.task, miss.algo, miss.seed, miss.cost, miss.cost_limit,
-                    miss.training_cost, picked["cost"] if picked else math.nan, within,
-                    len(candidates))
-    return miss
+        pick = next((c for c in candidates if c["epoch"] == record["epoch"]), None)
+        picked = {"pick_cost": pick["cost"] if pick else math.nan, "candidates": len(candidates),
+                  "candidates_within": sum(c["cost"] <= record["pick_cost_limit"]
+                                           for c in candidates)}
+    return Miss(run.task, run.algo, run.seed, float(evaluation["cost_mean"]), run.cost_limit,
+                training_cost, **picked)
 
 
 @dataclass(frozen=True)
