@@ -67,6 +67,11 @@ report: $(STAMP)
 	$(BIN)/s3rl-report results/reproduction --out docs/reproduction
 	$(BIN)/s3rl-report lagrangian results/reproduction/*/seed* \
 		--out docs/reproduction/lagrangian.json --plot docs/reproduction/lagrangian.png
+	for protocol in last delivered; do \
+		$(BIN)/s3rl-report gap $(GAP_SETTINGS) --protocol $$protocol \
+			--out docs/reproduction/gap_$$protocol.md \
+			--json docs/reproduction/gap_$$protocol.json || exit 1; \
+	done
 	$(BIN)/s3rl-report results/safe_sound results/table1 --no-embeddings --out docs/table1
 	$(BIN)/python docs/update_table1.py
 	$(BIN)/s3rl-report lagrangian results/table1/*/seed* \
@@ -88,6 +93,15 @@ endif
 # algo, SafetyPointGoal1 at a mean reward >= 20 for a mean cost <= 25, 85% of the reward kept.
 V2_TARGETS = --within s3rl=46 --within sac_lag=46 --task-target SafetyPointGoal1-v0=20,25 \
 	--reward-kept 0.85
+
+# S3RL against SAC-Lag on the reproduction's tasks (issue 63) under the paper's settings, under
+# experiment=safe's sound critics with the controller before the delivered-policy preset, and
+# under the preset itself (results/table1_v2, once it has runs).
+GAP_SETTINGS = --setting 'paper settings=results/reproduction' \
+	--setting 'sound critics, limit as target=results/safe_sound,results/table1'
+ifneq ($(wildcard results/table1_v2),)
+GAP_SETTINGS += --setting 'sound critics, delivered-policy preset=results/table1_v2'
+endif
 
 # S3RL's graded (cost-to-go) and binary contrastive labels, compared by group label.
 GRADED = s3rl (algo.contrastive_cfg.label=cost_to_go)

@@ -23,7 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from s3rl_torchrl.report.runs import PROTOCOLS, ReportError, Run, find_runs
+from s3rl_torchrl.report.runs import (
+    PROTOCOLS,
+    ReportError,
+    Run,
+    final_evaluation,
+    runs_by_key,
+)
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
 
 __all__ = [
@@ -147,30 +153,6 @@ class BeforeAfter:
         return sorted({r.algo for r in self.rows})
 
 
-def _finals(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
-    runs: dict[tuple[str, str, int], Run] = {}
-    for root in roots:
-        for run in find_runs(root):
-            key = (run.task, run.algo, run.seed)
-            if key in runs:
-                raise ReportError(
-                    f"{run.task} {run.algo} seed {run.seed} is in {runs[key].path} and in "
-                    f"{run.path}: give each preset's runs once."
-                )
-            runs[key] = run
-    return runs
-
-
-def _evaluation(run: Run, protocol: str) -> dict | None:
-    if run.final is None:
-        return None
-    if protocol == "delivered" and not run.config.get("eval", {}).get("delivery_epochs"):
-        # A run without eval.delivery_epochs picked nothing: it delivered its last policy, which
-        # is what a preset before the pick is compared on.
-        return run.final
-    return run.final if protocol == "last" else run.final.get(protocol)
-
-
 def before_after(
     before: Sequence[str | Path],
     after: Sequence[str | Path],
@@ -194,13 +176,13 @@ def before_after(
     """
     if protocol not in PROTOCOLS:
         raise ReportError(f"Unknown protocol {protocol!r}; valid: {', '.join(PROTOCOLS)}.")
-    old, new = _finals(before), _finals(after)
+    old, new = runs_by_key(before), runs_by_key(after)
     paired: dict[tuple[str, str], list[SeedPair]] = {}
     limits: dict[tuple[str, str], float] = {}
     unpaired, misses = [], []
     for key in sorted(set(old) | set(new)):
-        a = _evaluation(old[key], protocol) if key in old else None
-        b = _evaluation(new[key], protocol) if key in new else None
+        a = final_evaluation(old[key], protocol) if key in old else None
+        b = final_evaluation(new[key], protocol) if key in new else None
         if a is None or b is None:
             why = ("after only" if key not in old else "before only" if key not in new
                    else "unfinished")

@@ -5,6 +5,7 @@ analyses of runs as subcommands:
     s3rl-report lagrangian RUN_DIR... [--out ...]     the Lagrange multiplier's dynamics
     s3rl-report compare-runs RUN_A RUN_B [--out ...]  do two runs give the same metrics?
     s3rl-report before-after --before OLD... --after NEW...   two presets, paired per seed
+    s3rl-report gap --setting NAME=DIR[,DIR...]...    one algo against another, per preset
 
 A first argument naming a subcommand selects it; anything else is the report's ``RUNS`` (a
 directory that happens to be called ``lagrangian`` is written ``./lagrangian``).
@@ -56,7 +57,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             "Subcommands (each with --help): 's3rl-report lagrangian RUN_DIR...' summarises "
             "how the Lagrange multiplier and the cost behave over training; 's3rl-report "
             "compare-runs RUN_A RUN_B' gives the largest relative difference of two runs' "
-            "metrics."
+            "metrics; 's3rl-report before-after --before OLD... --after NEW...' pairs two "
+            "presets' runs per seed; 's3rl-report gap --setting NAME=DIR[,DIR...]...' puts one "
+            "algo against another on the same tasks under several presets."
         ),
     )
     parser.add_argument("runs", nargs="+",
@@ -238,10 +241,78 @@ def before_after_main(argv: Sequence[str]) -> int:
     return 0
 
 
+def _setting(text: str) -> tuple[str, list[str]]:
+    name, sep, trees = text.partition("=")
+    paths = [t for t in trees.split(",") if t]
+    if not name or not sep or not paths:
+        raise argparse.ArgumentTypeError(
+            f"expected NAME=DIR[,DIR...] (e.g. paper=results/reproduction), got {text!r}")
+    return name, paths
+
+
+def gap_main(argv: Sequence[str]) -> int:
+    """``s3rl-report gap``: :func:`s3rl_torchrl.report.gap.gap`."""
+    parser = argparse.ArgumentParser(
+        prog="s3rl-report gap",
+        description=(
+            "One algo against another on the tasks of the first setting, under every setting "
+            "(a preset's result trees): per task the mean cost and reward of each, their "
+            "paired difference and the paper's, and per setting rliable's probability of "
+            "improvement over the tasks all settings have."
+        ),
+    )
+    parser.add_argument("--setting", action="append", required=True, type=_setting,
+                        metavar="NAME=DIR[,DIR...]",
+                        help="a preset's name and result trees; the first one's tasks are read")
+    parser.add_argument("--reference", default="s3rl", help="default: s3rl")
+    parser.add_argument("--baseline", default="sac_lag", help="default: sac_lag")
+    parser.add_argument("--protocol", default="last", choices=tuple(PROTOCOLS),
+                        help="which final evaluation (default: last)")
+    parser.add_argument("--reps", type=_positive, default=2000,
+                        help="bootstrap resamples (default: 2000)")
+    parser.add_argument("--seed", type=_non_negative, default=0, help="bootstrap seed")
+    parser.add_argument("--out", type=Path, required=True, help="markdown page")
+    parser.add_argument("--json", type=Path, default=None, help="the same as JSON")
+    args = parser.parse_args(argv)
+    names = [name for name, _ in args.setting]
+    if len(set(names)) < len(names):
+        parser.error(f"each --setting needs its own name, got {', '.join(names)}")
+    from dataclasses import asdict
+
+    from s3rl_torchrl.report.gap import gap, write_markdown
+    from s3rl_torchrl.report.records import write_json
+
+    command = shlex.join(["s3rl-report", "gap", *argv])
+    try:
+        result = gap(dict(args.setting), args.reference, args.baseline, args.protocol,
+                     reps=args.reps, seed=args.seed)
+    except ReportError as err:
+        print(f"s3rl-report gap: error: {err}", file=sys.stderr)
+        return 2
+    print(f"wrote {write_markdown(result, args.out, command)}")
+    if args.json is not None:
+        rows = [{"task": row.task, "setting": row.setting, "cost_limit": row.cost_limit,
+                 "seeds": {algo: {str(s): {"reward": v[0], "cost": v[1]}
+                                  for s, v in sorted(by_seed.items())}
+                           for algo, by_seed in row.seeds.items()},
+                 "reward_difference": asdict(row.reward_test),
+                 "cost_difference": asdict(row.cost_test),
+                 "paper_cost_difference": result.paper_difference(row.task, "cost"),
+                 "paper_reward_difference": result.paper_difference(row.task, "reward")}
+                for (_, _), row in sorted(result.rows.items())]
+        write_json(args.json, {"reference": result.reference, "baseline": result.baseline,
+                               "protocol": result.protocol, "settings": result.settings,
+                               "rows": rows, "shared_tasks": result.shared,
+                               "answers": [asdict(a) for a in result.answers],
+                               "missing": result.missing}, command)
+    return 0
+
+
 SUBCOMMANDS: dict[str, Callable[[Sequence[str]], int]] = {
     "lagrangian": lagrangian_main,
     "compare-runs": compare_runs_main,
     "before-after": before_after_main,
+    "gap": gap_main,
 }
 
 

@@ -30,6 +30,8 @@ __all__ = [
     "flatten",
     "config_differences",
     "under_protocol",
+    "runs_by_key",
+    "final_evaluation",
     "RUN_SPECIFIC_KEYS",
 ]
 
@@ -161,6 +163,34 @@ def under_protocol(group: RunGroup, protocol: str) -> RunGroup | None:
         if protocol in run.final
     ]
     return RunGroup(group.task, group.algo, runs, group.extra) if runs else None
+
+
+def runs_by_key(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
+    """(task, algo, seed) -> the run, over every run below ``roots`` (one preset's result
+    trees); a key found twice is an error, since a comparison would have to guess which."""
+    runs: dict[tuple[str, str, int], Run] = {}
+    for root in roots:
+        for run in find_runs(root):
+            key = (run.task, run.algo, run.seed)
+            if key in runs:
+                raise ReportError(
+                    f"{run.task} {run.algo} seed {run.seed} is in {runs[key].path} and in "
+                    f"{run.path}: give each preset's runs once."
+                )
+            runs[key] = run
+    return runs
+
+
+def final_evaluation(run: Run, protocol: str) -> dict | None:
+    """``run``'s final evaluation under ``protocol`` (a PROTOCOLS key), None when it has none
+    (unfinished, or written before that protocol existed). Under ``delivered``, a run without
+    ``eval.delivery_epochs`` picked nothing: it delivered its last policy, which is what a
+    preset before the pick is compared on."""
+    if run.final is None:
+        return None
+    if protocol == "delivered" and not run.config.get("eval", {}).get("delivery_epochs"):
+        return run.final
+    return run.final if protocol == "last" else run.final.get(protocol)
 
 
 def _read_metrics(path: Path) -> list[dict[str, float]]:

@@ -204,7 +204,7 @@ def test_the_subcommand_writes_the_summary_with_its_command(tmp_path, capsys):
 def test_a_report_of_a_directory_named_like_a_subcommand_is_written_with_a_path(tmp_path):
     from s3rl_torchrl.report.cli import SUBCOMMANDS, parse_args
 
-    assert set(SUBCOMMANDS) == {"lagrangian", "compare-runs", "before-after"}
+    assert set(SUBCOMMANDS) == {"lagrangian", "compare-runs", "before-after", "gap"}
     # The report's own arguments are as before: RUNS first, then its options.
     args = parse_args(["./lagrangian", "--out", str(tmp_path)])
     assert (args.runs, args.out) == (["./lagrangian"], str(tmp_path))
