@@ -59,8 +59,10 @@ class SACConfig(OffPolicyConfig):
     cost_entropy: bool = True  # subtract alpha*log_pi in the cost targets (FSRL, paper)
     # The cost critics under the Lagrangian (objectives/sac_lag.py, docs/objectives.md "Sound
     # critics"); the defaults are FSRL's (experiment=paper), configs/critic_settings/ names sets.
-    # How the pair is read in the cost targets and the actor loss: min (FSRL), max or mean.
+    # How the pair is read in the actor loss (and the cost targets): min (FSRL), max or mean.
     cost_critic_read: str = "min"
+    # The read in the cost targets alone; None: cost_critic_read's.
+    cost_target_read: str | None = None
     cost_nonnegative: bool = False  # clamp the cost value at 0 in its target and actor read
     # With rescaling: divide the entropy term by 1 + lambda too (FSRL); false keeps alpha's
     # term out of the rescaling, so auto alpha does not grow with lambda.
@@ -74,6 +76,8 @@ class SACConfig(OffPolicyConfig):
         for name in ("alpha_lr", "alpha_init"):
             check_positive(f"{path}.{name}", getattr(self, name))
         check_choice(f"{path}.cost_critic_read", self.cost_critic_read, COST_CRITIC_READS)
+        if self.cost_target_read is not None:
+            check_choice(f"{path}.cost_target_read", self.cost_target_read, COST_CRITIC_READS)
         check_choice(f"{path}.update_order", self.update_order, UPDATE_ORDERS)
 
 
@@ -259,6 +263,7 @@ def build_sac_agent(algo: SACConfig, nets: Networks, compile_fn: CompileFn | Non
         rescaling=algo.rescaling,
         entropy_rescaling=algo.entropy_rescaling,
         cost_critic_read=algo.cost_critic_read,
+        cost_target_read=algo.cost_target_read,
         cost_nonnegative=algo.cost_nonnegative,
         lagrangian_init=algo.lagrangian_init if constrained else 0.0,
     )

@@ -71,7 +71,11 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             ``"smooth_l1"``. alpha_init: also when auto-tuned (paper: 0.005).
         entropy_in_cost_target, rescaling, entropy_rescaling: FSRL's (on), see the formulas.
         cost_critic_read: ``"min"`` (FSRL), ``"max"`` or ``"mean"`` of a cost pair, in the
-            targets and the actor loss. cost_nonnegative: clamp that read at 0 (FSRL: off).
+            actor loss, and in the targets unless ``cost_target_read`` is given.
+        cost_target_read: the read in the cost targets alone (default: ``cost_critic_read``'s);
+            e.g. ``"mean"`` there with ``"max"`` in the actor loss keeps the actor's caution
+            without bootstrapping the max's over-read into every target.
+        cost_nonnegative: clamp both reads at 0 (FSRL: off).
         lagrangian_init: a number or ``m`` values, >= 0.
         sac_kwargs: ``SACLoss``'s other arguments (``fixed_alpha``, ``action_spec``, ...).
 
@@ -115,6 +119,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         rescaling: bool = True,
         entropy_rescaling: bool = True,
         cost_critic_read: Literal["min", "max", "mean"] = "min",
+        cost_target_read: Literal["min", "max", "mean"] | None = None,
         cost_nonnegative: bool = False,
         lagrangian_init: float | Sequence[float] | Tensor = 0.0,
         **sac_kwargs,
@@ -136,6 +141,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             choices={
                 "loss_function": (loss_function, _LOSS_FUNCTIONS),
                 "cost_critic_read": (cost_critic_read, COST_CRITIC_READS),
+                "cost_target_read": (cost_target_read or cost_critic_read, COST_CRITIC_READS),
                 "reduction": (sac_kwargs.get("reduction") or "mean", ("mean", "sum", "none")),
             },
             alpha_init=alpha_init,
@@ -150,6 +156,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
         self.rescaling = bool(rescaling)
         self.entropy_rescaling = bool(entropy_rescaling)
         self.cost_critic_read = cost_critic_read
+        self.cost_target_read = cost_target_read or cost_critic_read
         self.cost_nonnegative = bool(cost_nonnegative)
         self._init_lagrangian(lagrangian_init, device=self.log_alpha.device)
         if num_costs > 0:
@@ -230,12 +237,14 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
     def _cached_detached_cost_qvalue_params(self):  # detached tensors share storage: current
         return detached(self.cost_qvalue_network_params)
 
-    def read_cost(self, q_cost: Tensor) -> Tensor:
-        """The cost critics ``[m, N, *B]`` read into one value per cost ``[m, *B]``
-        (``cost_critic_read``)."""
-        if self.cost_critic_read == "min":
+    def read_cost(self, q_cost: Tensor, how: str | None = None) -> Tensor:
+        """The cost critics ``[m, N, *B]`` read into one value per cost ``[m, *B]``: through
+        ``how`` (``"min"``, ``"max"`` or ``"mean"``; default ``cost_critic_read``, the actor
+        loss's read)."""
+        how = how or self.cost_critic_read
+        if how == "min":
             return q_cost.min(1)[0]
-        if self.cost_critic_read == "max":
+        if how == "max":
             return q_cost.max(1)[0]
         return q_cost.mean(1)
 
@@ -274,7 +283,7 @@ class SACLagLoss(LagrangianBufferMixin, SACLoss):
             if q_cost is not None:
                 if self.entropy_in_cost_target:
                     q_cost = q_cost - entropy_term
-                next_cost_value = self.read_cost(q_cost).movedim(0, -1)
+                next_cost_value = self.read_cost(q_cost, self.cost_target_read).movedim(0, -1)
                 if self.cost_nonnegative:
                     next_cost_value = next_cost_value.clamp_min(0.0)
                 next_value = torch.cat([next_value, next_cost_value], -1)

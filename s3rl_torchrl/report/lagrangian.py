@@ -177,10 +177,14 @@ def _critic_setting(algo: dict) -> str:
     label = ""
     if "cost_critic_read" in algo:
         critics = {key: algo.get(key, default) for key, default in _FSRL_CRITICS.items()}
-        if critics != _FSRL_CRITICS:
+        # The targets' own read (cost_target_read), when it differs from the actor loss's.
+        read = critics["cost_critic_read"]
+        target = algo.get("cost_target_read") or read
+        if critics != _FSRL_CRITICS or target != read:
             sound = critics["cost_nonnegative"] and not critics["cost_entropy"]
             sound = sound and not critics["entropy_rescaling"]
-            label += f" {'sound' if sound else 'critic'}(read={critics['cost_critic_read']})"
+            targets = f",target={target}" if target != read else ""
+            label += f" {'sound' if sound else 'critic'}(read={read}{targets})"
     for name, option in REMOVED_OPTIONS.items():  # the runs made before it left
         if algo.get(name, option.default) != option.default:
             label += f" {name}={algo[name]}"

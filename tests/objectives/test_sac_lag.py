@@ -558,6 +558,38 @@ def test_cost_targets_read_the_pair_as_configured_by_hand(read, nonnegative):
         close(target_c[:, i], batch["next", "cost"][:, i] + GAMMA * alive * v, atol=1e-5)
 
 
+@pytest.mark.parametrize(("actor_read", "target_read"), [("max", "mean"), ("min", "max")])
+def test_the_targets_own_read_leaves_the_actor_loss_on_its_read_by_hand(actor_read, target_read):
+    # cost_target_read reads the pair in y_i; cost_critic_read keeps the actor loss's read.
+    loss, actor, critics, costs = make_loss(
+        1, cost_critic_read=actor_read, cost_target_read=target_read,
+        entropy_in_cost_target=False, rescaling=False,
+    )
+    assert (loss.cost_critic_read, loss.cost_target_read) == (actor_read, target_read)
+    batch = make_batch(steps=False)
+    torch.manual_seed(6)
+    _, target_c = loss.compute_targets(batch)
+    torch.manual_seed(6)
+    nxt = batch["next", "observation"]
+    a_next, _ = sample(actor, nxt)
+    alive = (~batch["next", "terminated"].squeeze(-1)).float()
+    q_next = q_values(costs, nxt, a_next)
+    v = READS[target_read](q_next[0], q_next[1])
+    close(target_c[:, 0], batch["next", "cost"][:, 0] + GAMMA * alive * v, atol=1e-5)
+    loss.lagrangian = 2.0
+    obs = batch["observation"]
+    torch.manual_seed(7)
+    loss_actor, _ = loss.actor_loss(batch.clone())
+    torch.manual_seed(7)
+    a, logp = sample(actor, obs)
+    q_c = q_values(costs, obs, a)
+    q_r = q_values(critics, obs, a).min(0)[0]
+    close(loss_actor, (ALPHA * logp - q_r + 2.0 * READS[actor_read](q_c[0], q_c[1])).mean())
+    # Without it, the targets read as the actor loss does (what runs before the option did).
+    plain, *_ = make_loss(1, cost_critic_read=actor_read)
+    assert plain.cost_target_read == actor_read
+
+
 def test_nonnegative_cost_values_clamp_a_negative_critic():
     # Biases of -5 make every cost value negative: the target then is the cost itself, and the
     # actor's penalty term is 0 (no gradient pulls the policy towards a negative cost value).
@@ -611,6 +643,8 @@ def test_default_is_fsrl_and_bad_read_is_refused():
     )
     with pytest.raises(ValueError, match="cost_critic_read 'median'.*'min', 'max', 'mean'"):
         make_loss(1, cost_critic_read="median")
+    with pytest.raises(ValueError, match="cost_target_read 'upper'.*'min', 'max', 'mean'"):
+        make_loss(1, cost_target_read="upper")
 
 
 def test_critic_values_are_the_current_critics():

@@ -210,6 +210,10 @@ def test_a_report_of_a_directory_named_like_a_subcommand_is_written_with_a_path(
     assert (args.runs, args.out) == (["./lagrangian"], str(tmp_path))
 
 
+_FSRL = {"cost_critic_read": "min", "cost_nonnegative": False, "cost_entropy": True,
+         "entropy_rescaling": True}
+
+
 def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
     config = {
         "algo": {"lagrangian": "learned", "lagrangian_lr": 3e-6, "lagrangian_cadence": "step",
@@ -230,6 +234,14 @@ def test_the_setting_names_the_critics_and_what_else_a_selection_varies():
     assert ld.setting_name(config) == expected
     config["algo"]["cost_nonnegative"] = False
     assert "critic(read=mean)" in ld.setting_name(config)
+    # The targets' own read is named where it differs from the actor loss's, FSRL's min too.
+    config["algo"] |= {"cost_nonnegative": True, "cost_critic_read": "max",
+                       "cost_target_read": "mean"}
+    assert "sound(read=max,target=mean)" in ld.setting_name(config)
+    config["algo"] |= {"cost_target_read": "max"}
+    assert "sound(read=max)" in ld.setting_name(config)
+    config["algo"] |= _FSRL | {"cost_target_read": "mean"}
+    assert ld.setting_name(config).startswith(f"{base} critic(read=min,target=mean)")
 
 
 def test_where_the_multiplier_lets_go_by_hand(tmp_path):

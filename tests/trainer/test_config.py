@@ -100,6 +100,16 @@ def test_the_sound_critics_are_the_sac_familys(compose):
     assert not hasattr(ppo.algo, "cost_critic_read")
 
 
+def test_the_cost_targets_own_read_is_a_choice_of_the_sac_family(compose):
+    # Unset in both critic sets: the targets read the pair as the actor loss does.
+    for critic in ("sound", "fsrl"):
+        assert validate(compose("algo=sac_lag", f"critic={critic}")).algo.cost_target_read is None
+    split = validate(compose("algo=s3rl", "experiment=safe", "algo.cost_target_read=mean")).algo
+    assert (split.cost_critic_read, split.cost_target_read) == ("max", "mean")
+    with pytest.raises(ConfigError, match="'algo.cost_target_read'.*min, max, mean"):
+        validate(compose("algo=sac_lag", "algo.cost_target_read=upper"))
+
+
 def test_an_algorithm_name_with_another_familys_yaml_is_refused(compose):
     # algo=s3rl composes the SAC family's config; renaming it to a PPO algorithm does not make
     # it one.

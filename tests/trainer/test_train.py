@@ -307,9 +307,11 @@ def test_critics_keep_their_own_initialisation(tiny_config):
     # copies of a single module uniformly) and the critics differ from each other.
     from s3rl_torchrl.trainer.builders import build_agent, build_envs, build_replay_buffer
 
-    cfg = tiny_config("algo=sac_lag")
+    cfg = tiny_config("algo=sac_lag", "algo.cost_critic_read=max", "algo.cost_target_read=mean")
     env, _ = build_envs(cfg)  # no graded label: the train env reads no margin
     agent = build_agent(cfg, env, build_replay_buffer(cfg.algo))
+    # The config's reads reach the loss (tests/objectives/test_sac_lag.py: what each reads).
+    assert (agent.loss.cost_critic_read, agent.loss.cost_target_read) == ("max", "mean")
     for name in ("qvalue_network_params", "cost_qvalue_network_params"):
         params = getattr(agent.loss, name)
         first_layer = [p for k, p in params.items(True, True) if p.ndim == 3][0]  # [2, out, in]
