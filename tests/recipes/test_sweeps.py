@@ -66,8 +66,8 @@ def test_the_committed_sweeps_are_found():
     shipped = {"table1", "table1_v2", "reproduction"}
     assert {p.stem for p in (config_dir() / "sweep").glob("*.yaml")} == shipped
     assert all(is_research(name) for name in SWEEPS if name not in shipped)
-    # Issue 63's runs: four tasks, two algos, three seeds.
-    assert len(sweep_jobs("reproduction")) == 24
+    # Issue 63's runs.
+    assert len(sweep_jobs("reproduction")) == 36  # six tasks x two algos x three seeds
     # Issue 60's evidence: one run per committed run of Table 1 (the same algo, task and seed),
     # which make report pairs it with.
     committed = {
