@@ -15,7 +15,10 @@ A rejected config leaves no run directory behind; a run's ``train.log`` holds wh
 
 from __future__ import annotations
 
+import math
 import sys
+from collections.abc import Sequence
+from pathlib import Path
 from typing import NoReturn
 
 import hydra
@@ -24,6 +27,7 @@ from omegaconf import DictConfig
 
 from s3rl_torchrl.recipes import HydraOutput, config_dir, console_to_log, quiet_known_warnings
 from s3rl_torchrl.recipes.unknown_options import hint_unknown_option
+from s3rl_torchrl.report.runs import final_evaluation, read_run
 from s3rl_torchrl.trainer import (
     CheckpointError,
     ConfigError,
@@ -73,8 +77,29 @@ def contrastive_summary(cfg: TrainConfig, result: TrainResult) -> str | None:
     return line + "."
 
 
+def sweep_objective(objective: str, run_dirs: Sequence[Path]) -> float | list[float]:
+    """What a Hydra sweeper (e.g. Optuna's) optimises: ``objective`` (``OBJECTIVES``) of the
+    final evaluation of the policy each run delivers, mean over the runs (a sweep job's seeds).
+
+    The delivered policy is ``eval.delivery_epochs``' pick where the run made one, its last
+    policy otherwise (``final_eval.json``, as ``s3rl-report`` reads it). ``reward_cost`` is
+    ``[reward, cost]``, for a two-objective study (``directions: [maximize, minimize]``). NaN
+    (each) while a run has no final evaluation."""
+    rewards, costs = [], []
+    for run_dir in run_dirs:
+        run = read_run(run_dir)
+        evaluation = (final_evaluation(run, "delivered") or run.final) if run.finished else None
+        if evaluation is None:
+            rewards, costs = [math.nan], [math.nan]
+            break
+        rewards.append(float(evaluation["reward_mean"]))
+        costs.append(float(evaluation["cost_mean"]))
+    reward, cost = sum(rewards) / len(rewards), sum(costs) / len(costs)
+    return {"reward": reward, "cost": cost, "reward_cost": [reward, cost]}[objective]
+
+
 @hydra.main(version_base="1.3", config_path=CONFIG_DIR, config_name="train")
-def _main(cfg: DictConfig) -> float:
+def _main(cfg: DictConfig) -> float | list[float]:
     quiet_known_warnings()  # here, not in main(): a launcher runs each job in its own process
     output = HydraOutput.current()  # before anything writes into the run directory
     # resume=auto: this command's run directory (a fixed hydra.run.dir, or a sweep's job
@@ -118,9 +143,7 @@ def _main(cfg: DictConfig) -> float:
     stopped = [r.exit_status for r in results if r.status == "interrupted"]
     if stopped:
         sys.exit(stopped[0])
-    # The return value is what Hydra sweepers (e.g. Optuna) optimise (the mean over seeds).
-    rewards = [r.final_eval.reward_mean for r in results if r.final_eval is not None]
-    return sum(rewards) / len(rewards) if len(rewards) == len(results) else float("nan")
+    return sweep_objective(train_cfg.objective, [r.run_dir for r in results])
 
 
 def main() -> None:

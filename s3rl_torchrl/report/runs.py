@@ -26,6 +26,7 @@ __all__ = [
     "Run",
     "RunGroup",
     "find_runs",
+    "read_run",
     "group_runs",
     "flatten",
     "config_differences",
@@ -54,6 +55,7 @@ RUN_SPECIFIC_KEYS = (
     "save_interval",
     "eval.random_baseline",
     "resumes",  # what each resume changed (trainer.resume.record_resume)
+    "objective",  # what the run returns to a sweeper
 )
 
 

@@ -59,6 +59,9 @@ LOGGER_PACKAGES = {
     "mlflow": ("mlflow", "mlflow"),
 }
 DEVICES = ("cpu", "cuda", "mps")
+#: What ``s3rl-train`` returns to a sweeper, of the delivered policy's final evaluation (mean over
+#: seeds): its reward (maximise), its cost (minimise), or both, for a two-objective study.
+OBJECTIVES = ("reward", "cost", "reward_cost")
 # The loggers whose log_video writes a video here (eval.video_interval): torchrl's MLflow logger
 # needs torchcodec and a system FFmpeg, `none` logs nothing.
 VIDEO_LOGGERS = ("csv", "tensorboard", "wandb")
@@ -304,6 +307,9 @@ class TrainConfig:
     compile: bool = True
     save_interval: int = 4  # epochs between checkpoints (and one at the end)
     resume: str | None = None  # a run directory to continue; "auto" (recipe): its own, if any
+    # What s3rl-train returns to a Hydra sweeper (e.g. Optuna's), from the final evaluation of
+    # the policy the run delivers (recipes/train.py: sweep_objective); trains nothing else.
+    objective: str = "reward"
 
     def check(self, path: str = "") -> None:
         prefix = f"{path}." if path else ""
@@ -323,6 +329,7 @@ class TrainConfig:
         check_seed(prefix + "seed", self.seed)
         check_range(prefix + "threads", self.threads, 0)
         check_range(prefix + "save_interval", self.save_interval, 1)
+        check_choice(prefix + "objective", self.objective, OBJECTIVES)
         # Only the SAC family compiles its loss (DDPG and PPO are always eager): their runs
         # need no C++ compiler, whatever `compile` says.
         if self.compile and self.device == "cpu" and family.name == "sac":

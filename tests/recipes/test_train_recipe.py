@@ -1,11 +1,17 @@
-"""``s3rl-train``'s line about the contrastive phases under the final table."""
+"""``s3rl-train``: the line about the contrastive phases under the final table, what it returns
+to a sweeper, and resume=auto across a sweep."""
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
-from s3rl_torchrl.recipes.train import contrastive_summary
-from s3rl_torchrl.trainer import Counters, TrainConfig, TrainResult
+import pytest
+
+from s3rl_torchrl.recipes.train import contrastive_summary, sweep_objective
+from s3rl_torchrl.trainer import ConfigError, Counters, TrainConfig, TrainResult, train, validate
+from tests.report.conftest import write_run
 
 
 def result(ran: int, skipped: int) -> TrainResult:
@@ -31,6 +37,44 @@ def test_skips_are_explained_with_the_runs_batch_size():
         contrastive_summary(cfg, result(0, 1))
     )
     assert contrastive_summary(cfg, result(5, 0)) == "Contrastive phases: 5 ran, 0 skipped."
+
+
+def _episodes(reward: float, cost: float) -> dict:
+    return {"rewards": [reward - 1, reward + 1], "costs": [cost - 1, cost + 1],
+            "lengths": [50, 50], "safe_steps": [50, 50]}
+
+
+def test_a_sweeper_gets_the_delivered_policys_evaluation_mean_over_seeds(tmp_path):
+    # Seed 1 delivered its last policy (no pick); seed 2 its pick (eval.delivery_epochs),
+    # whose evaluation is final_eval.json's `delivered`, not the last policy's 20 / 4.
+    last = write_run(tmp_path / "seed1", seed=1, episodes=_episodes(10, 2))
+    picked = write_run(tmp_path / "seed2", seed=2, episodes=_episodes(20, 4),
+                       eval__delivery_epochs=10)
+    final = json.loads((picked / "final_eval.json").read_text())
+    final["delivered"] = {"reward_mean": 30.0, "cost_mean": 6.0, "epoch": 3}
+    (picked / "final_eval.json").write_text(json.dumps(final))
+    runs = [last, picked]
+    assert sweep_objective("reward", runs) == pytest.approx((10 + 30) / 2)
+    assert sweep_objective("cost", runs) == pytest.approx((2 + 6) / 2)
+    assert sweep_objective("reward_cost", runs) == pytest.approx([20.0, 4.0])
+    # A run that was to pick but kept no candidate delivered its last policy.
+    del final["delivered"]
+    (picked / "final_eval.json").write_text(json.dumps(final))
+    assert sweep_objective("reward", runs) == pytest.approx((10 + 20) / 2)
+    # A run without a final evaluation (interrupted): nothing to optimise yet.
+    unfinished = write_run(tmp_path / "seed3", seed=3, finished=False)
+    assert math.isnan(sweep_objective("reward", [last, unfinished]))
+    assert all(math.isnan(v) for v in sweep_objective("reward_cost", [unfinished, last]))
+
+
+def test_the_objective_of_a_trained_run_and_a_bad_choice(tiny_config, tmp_path):
+    cfg = tiny_config("algo=sac", "collector.total_frames=200", "objective=cost")
+    result = train(cfg, tmp_path / "run")
+    saved = json.loads((tmp_path / "run" / "final_eval.json").read_text())
+    assert sweep_objective(cfg.objective, [result.run_dir]) == saved["cost_mean"]
+    cfg.objective = "safety"
+    with pytest.raises(ConfigError, match="'objective'.*reward, cost, reward_cost"):
+        validate(cfg)
 
 
 def _train(*args: str, cwd: Path):
