@@ -28,6 +28,7 @@ from s3rl_torchrl.report.runs import (
     ReportError,
     Run,
     final_evaluation,
+    late_epochs,
     runs_by_key,
 )
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
@@ -111,7 +112,7 @@ class Miss:
 
 def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
     costs = [row.get("train/cost", math.nan) for row in run.metrics]
-    tail = [c for c in costs[-max(1, round(0.2 * len(costs))):] if not math.isnan(c)]
+    tail = [c for c in late_epochs(costs) if not math.isnan(c)]
     training_cost = float(np.mean(tail)) if tail else math.nan
     picked = {}
     record = run.final.get("delivered")

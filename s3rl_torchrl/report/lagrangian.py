@@ -46,6 +46,7 @@ from pathlib import Path
 
 from s3rl_torchrl.algorithms.config import REMOVED_OPTIONS
 from s3rl_torchrl.report.records import write_json
+from s3rl_torchrl.report.runs import late_epochs
 
 __all__ = [
     "METRICS",
@@ -215,8 +216,7 @@ def summarise_run(run_dir: Path, until: int | None = None) -> dict:
     frames = [_float(r["frames"]) for r in rows]
     half = frames[-1] / 2
     late = [r for r, f in zip(rows, frames) if f > half]
-    # The targets' window (research/2026-11-24-lambda-cadence.md): the last 20% of epochs.
-    last20 = rows[-max(1, round(0.2 * len(rows))):]
+    last20 = late_epochs(rows)  # the targets' window
     col = {key: [_float(r.get(key)) for r in late] for key in rows[0]}
 
     def over(values: list[float]) -> float:

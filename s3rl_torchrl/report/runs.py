@@ -32,6 +32,8 @@ __all__ = [
     "config_differences",
     "under_protocol",
     "runs_by_key",
+    "late_epochs",
+    "LATE_SHARE",
     "final_evaluation",
     "RUN_SPECIFIC_KEYS",
 ]
@@ -166,6 +168,15 @@ def under_protocol(group: RunGroup, protocol: str) -> RunGroup | None:
     ]
     return RunGroup(group.task, group.algo, runs, group.extra) if runs else None
 
+
+#: The share of a run's epochs its late-training statistics read (the last 20%: what the
+#: multiplier held at the end, research/2026-11-24-lambda-cadence.md).
+LATE_SHARE = 0.2
+
+
+def late_epochs(rows: Sequence[Any], share: float = LATE_SHARE) -> Sequence[Any]:
+    """The last ``share`` of ``rows`` (one per epoch, in order), at least one."""
+    return rows[-max(1, round(share * len(rows))):]
 
 def runs_by_key(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
     """(task, algo, seed) -> the run, over every run below ``roots`` (one preset's result
