@@ -94,10 +94,9 @@ class Gap:
     def paper_difference(self, task: str, metric: str) -> float:
         """The paper's Table 1 (Lagrangian rows) reference - baseline difference, NaN when the
         paper has no such pair."""
-        names = {"s3rl": "S3RL", "sac_lag": "SAC-LAG"}
-        found = {v.method: v.mean for v in paper_results_for(task)
+        found = {v.algo: v.mean for v in paper_results_for(task)
                  if v.table == "Table 1" and v.setting == "Lag" and v.metric == metric}
-        a, b = names.get(self.reference), names.get(self.baseline)
+        a, b = self.reference, self.baseline
         return found[a] - found[b] if a in found and b in found else math.nan
 
 

@@ -58,6 +58,11 @@ def test_differences_per_task_and_setting_against_scipy(presets):
     # The paper's Table 1 (Lag rows): PointCircle1 5.17 against 32.65.
     assert result.paper_difference(CIRCLE, "cost") == pytest.approx(5.17 - 32.65)
     assert result.paper_difference(CIRCLE, "reward") == pytest.approx(37.54 - 22.15)
+    # Either way round; an algo the paper's Table 1 does not have gives none.
+    swapped = gap(presets, reference="sac_lag", baseline="s3rl", reps=50)
+    assert swapped.paper_difference(CIRCLE, "cost") == pytest.approx(32.65 - 5.17)
+    assert swapped.rows[CIRCLE, "paper"].cost_test.difference == pytest.approx(30.0)
+    assert math.isnan(gap(presets, baseline="ppo_lag", reps=50).paper_difference(CIRCLE, "cost"))
     # Only the cheetah's s3rl seed 10 under safe: the row is there, incomplete, untested.
     cheetah = result.rows[CHEETAH, "safe"]
     assert not cheetah.complete and math.isnan(cheetah.cost_test.pvalue)
