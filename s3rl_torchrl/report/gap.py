@@ -5,9 +5,10 @@ each named setting's result trees and, on the tasks of the first setting (the on
 about), puts the reference algo's final evaluation beside the baseline's under every setting:
 the mean cost and reward of each, their difference (reference - baseline) with a paired t-test
 over the seeds both ran, and the paper's Table 1 difference beside. Then one answer per setting
-over the tasks every setting has: rliable's probability that a run of the reference has the
-lower cost (and the higher reward) than a run of the baseline, with its stratified-bootstrap
-interval (:func:`s3rl_torchrl.report.aggregate.probability_of_improvement`).
+over the tasks it has both algos of (the same tasks once every setting is complete): rliable's
+probability that a run of the reference has the lower cost (and the higher reward) than a run of
+the baseline, with its stratified-bootstrap interval
+(:func:`s3rl_torchrl.report.aggregate.probability_of_improvement`).
 
 This is the question of issue 63: the paper's largest cost gaps come with a baseline whose
 critics are unsound (``experiment=paper``); whether the gap stays when both algos read sound
