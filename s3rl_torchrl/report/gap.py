@@ -131,21 +131,24 @@ def gap(
                           f"{', '.join(map(str, settings[first]))}.")
     rows: dict[tuple[str, str], TaskGap] = {}
     for name, runs in read.items():
-        for task in tasks:
-            seeds: dict[str, dict[int, tuple[float, float]]] = {}
-            limits = set()
-            for (t, algo, s), run in runs.items():
-                evaluation = final_evaluation(run, protocol)
-                if t != task or algo not in (reference, baseline) or evaluation is None:
-                    continue
-                seeds.setdefault(algo, {})[s] = (float(evaluation["reward_mean"]),
-                                                 float(evaluation["cost_mean"]))
-                limits.add(run.cost_limit)
-            if len(limits) > 1:
+        # task -> algo -> seed -> (reward, cost), and task -> the limits its runs trained for
+        seeds: dict[str, dict[str, dict[int, tuple[float, float]]]] = {}
+        limits: dict[str, set[float]] = {}
+        for (task, algo, s), run in runs.items():
+            if task not in tasks or algo not in (reference, baseline):
+                continue
+            evaluation = final_evaluation(run, protocol)
+            if evaluation is None:
+                continue
+            seeds.setdefault(task, {}).setdefault(algo, {})[s] = (
+                float(evaluation["reward_mean"]), float(evaluation["cost_mean"]))
+            limits.setdefault(task, set()).add(run.cost_limit)
+        for task, by_algo in seeds.items():
+            if len(limits[task]) > 1:
                 raise ReportError(f"{name}: {task}'s runs trained for different cost limits "
-                                  f"({', '.join(f'{c:g}' for c in sorted(limits))}).")
-            if seeds:
-                rows[task, name] = TaskGap(task, name, limits.pop(), seeds, reference, baseline)
+                                  f"({', '.join(f'{c:g}' for c in sorted(limits[task]))}).")
+            rows[task, name] = TaskGap(task, name, limits[task].pop(), by_algo, reference,
+                                       baseline)
     missing = [f"{name}: {task} {algo}" for name in read for task in tasks
                for algo in (reference, baseline)
                if not rows.get((task, name)) or not rows[task, name].seeds.get(algo)]

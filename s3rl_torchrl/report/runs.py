@@ -178,6 +178,7 @@ def late_epochs(rows: Sequence[Any], share: float = LATE_SHARE) -> Sequence[Any]
     """The last ``share`` of ``rows`` (one per epoch, in order), at least one."""
     return rows[-max(1, round(share * len(rows))):]
 
+
 def runs_by_key(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
     """(task, algo, seed) -> the run, over every run below ``roots`` (one preset's result
     trees); a key found twice is an error, since a comparison would have to guess which."""

@@ -11,7 +11,7 @@ import pytest
 
 from s3rl_torchrl.recipes.train import contrastive_summary, sweep_objective
 from s3rl_torchrl.trainer import ConfigError, Counters, TrainConfig, TrainResult, train, validate
-from tests.report.conftest import write_run
+from tests.report.conftest import episodes, write_run
 
 
 def result(ran: int, skipped: int) -> TrainResult:
@@ -39,16 +39,11 @@ def test_skips_are_explained_with_the_runs_batch_size():
     assert contrastive_summary(cfg, result(5, 0)) == "Contrastive phases: 5 ran, 0 skipped."
 
 
-def _episodes(reward: float, cost: float) -> dict:
-    return {"rewards": [reward - 1, reward + 1], "costs": [cost - 1, cost + 1],
-            "lengths": [50, 50], "safe_steps": [50, 50]}
-
-
 def test_a_sweeper_gets_the_delivered_policys_evaluation_mean_over_seeds(tmp_path):
     # Seed 1 delivered its last policy (no pick); seed 2 its pick (eval.delivery_epochs),
     # whose evaluation is final_eval.json's `delivered`, not the last policy's 20 / 4.
-    last = write_run(tmp_path / "seed1", seed=1, episodes=_episodes(10, 2))
-    picked = write_run(tmp_path / "seed2", seed=2, episodes=_episodes(20, 4),
+    last = write_run(tmp_path / "seed1", seed=1, episodes=episodes(10, 2))
+    picked = write_run(tmp_path / "seed2", seed=2, episodes=episodes(20, 4),
                        eval__delivery_epochs=10)
     final = json.loads((picked / "final_eval.json").read_text())
     final["delivered"] = {"reward_mean": 30.0, "cost_mean": 6.0, "epoch": 3}

@@ -52,6 +52,12 @@ def final_evaluation(ep: dict) -> dict:
     }
 
 
+
+def episodes(reward: float, cost: float) -> dict:
+    """Two episodes of a final evaluation whose means are (reward, cost)."""
+    return {"rewards": [reward - 1, reward + 1], "costs": [cost, cost],
+            "lengths": [50, 50], "safe_steps": [50, 50]}
+
 def write_run(
     path: Path,
     task: str = "SafetyHalfCheetahVelocity-v1",

@@ -12,14 +12,9 @@ from scipy import stats
 from s3rl_torchrl.report.before_after import before_after
 from s3rl_torchrl.report.cli import main
 from s3rl_torchrl.report.runs import ReportError
+from tests.report.conftest import episodes
 
 TASK = "SafetyHalfCheetahVelocity-v1"
-
-
-def episodes(reward: float, cost: float) -> dict:
-    # Two episodes whose means are (reward, cost).
-    return {"rewards": [reward - 1, reward + 1], "costs": [cost, cost],
-            "lengths": [50, 50], "safe_steps": [50, 50]}
 
 
 @pytest.fixture

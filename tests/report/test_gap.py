@@ -14,14 +14,10 @@ from s3rl_torchrl.report.aggregate import aggregate
 from s3rl_torchrl.report.cli import main
 from s3rl_torchrl.report.gap import gap
 from s3rl_torchrl.report.runs import ReportError, find_runs, group_runs
+from tests.report.conftest import episodes
 
 CHEETAH = "SafetyHalfCheetahVelocity-v1"
 CIRCLE = "SafetyPointCircle1-v0"
-
-
-def episodes(reward: float, cost: float) -> dict:
-    return {"rewards": [reward - 1, reward + 1], "costs": [cost, cost],
-            "lengths": [50, 50], "safe_steps": [50, 50]}
 
 
 @pytest.fixture
