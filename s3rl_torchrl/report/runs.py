@@ -16,8 +16,11 @@ import math
 import shutil
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
+
+from omegaconf.errors import OmegaConfBaseException
 
 __all__ = [
     "PROTOCOLS",
@@ -107,6 +110,24 @@ class Run:
     def checkpoint(self) -> Path | None:
         path = self.path / CHECKPOINT_DIR
         return path if path.is_dir() else None
+
+    @cached_property
+    def settings(self) -> dict[str, Any]:
+        """The config the run ran with, flattened (``algo.pid.kp``), as this version reads it
+        (``trainer.config.saved_config_node``): an option added after the run holds the
+        default the run had, a field its algorithm family never read is gone. So a run saved
+        before ``algo.cost_target_read`` existed and one saved with it unset are the same
+        experiment. A config this version cannot read (an option removed at a value other than
+        its default) is compared as written."""
+        # The trainer's config pulls in torch through the algorithms: imported only once a
+        # report compares configs.
+        from s3rl_torchrl.trainer.config import saved_train_config, to_container
+
+        written = {key: value for key, value in self.config.items() if key != "resumes"}
+        try:
+            return flatten(to_container(saved_train_config(written)))
+        except (ValueError, OmegaConfBaseException):  # ConfigError is a ValueError
+            return flatten(written)
 
     def column(self, name: str) -> tuple[list[float], list[float]]:
         """(frames, values) of a metrics.csv column (rows without the column are skipped)."""
@@ -335,9 +356,10 @@ def _ignored(key: str, ignore: Iterable[str]) -> bool:
 def config_differences(
     runs: Sequence[Run], ignore: Iterable[str] = RUN_SPECIFIC_KEYS
 ) -> dict[str, list[Any]]:
-    """The config keys whose values differ between ``runs`` -> each run's value (in order)."""
+    """The config keys whose values differ between ``runs`` -> each run's value (in order),
+    read as each run ran (:attr:`Run.settings`)."""
     ignore = tuple(ignore)
-    flats = [flatten(r.config) for r in runs]
+    flats = [r.settings for r in runs]
     keys = sorted(set().union(*flats))
     missing = object()
     diff = {}
@@ -359,7 +381,7 @@ def group_runs(runs: Sequence[Run], group_by: Sequence[str] = ()) -> list[RunGro
     """
     buckets: dict[tuple, list[Run]] = {}
     for run in runs:
-        flat = flatten(run.config)
+        flat = run.settings
         for key in group_by:
             if key not in flat:
                 raise ReportError(

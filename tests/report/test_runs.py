@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
-from s3rl_torchrl.report.runs import ReportError, find_runs, group_runs
+from s3rl_torchrl.report.runs import ReportError, config_differences, find_runs, group_runs
 
 
 def test_empty_directory_is_an_error(tmp_path):
@@ -55,6 +57,39 @@ def test_mixed_configs_are_refused_with_the_differing_keys(tmp_path, make_run):
     ]
     with pytest.raises(ReportError, match="no such config key"):
         group_runs(runs, group_by=["algo.nope"])
+
+
+def test_configs_are_compared_as_each_run_ran(tmp_path, make_run):
+    # A run saved before algo.cost_target_read existed, holding fields its family never read
+    # and a removed option at its default, ran as one saved with the option unset.
+    old = make_run(tmp_path / "old", seed=1, algo__ppo_epochs=10, algo__cost_gamma=None)
+    new = make_run(tmp_path / "new", seed=2, algo__cost_target_read=None)
+    changed = make_run(tmp_path / "changed", seed=3, algo__cost_target_read="mean")
+    config = json.loads((old / "config.json").read_text())
+    config["resumes"] = [{"frames": 200, "changed": {}, "exact": True}]
+    (old / "config.json").write_text(json.dumps(config))
+
+    runs = {r.seed: r for r in find_runs(tmp_path)}
+    assert "algo.cost_target_read" not in runs[1].config["algo"]
+    assert runs[1].settings["algo.cost_target_read"] is None
+    assert "algo.ppo_epochs" not in runs[1].settings
+    assert config_differences([runs[1], runs[2]]) == {}
+    assert config_differences([runs[1], runs[3]]) == {"algo.cost_target_read": [None, "mean"]}
+    groups = group_runs(list(runs.values()), group_by=["algo.cost_target_read"])
+    assert sorted((g.label, sorted(r.seed for r in g.runs)) for g in groups) == [
+        ("s3rl (algo.cost_target_read=None)", [1, 2]),
+        ("s3rl (algo.cost_target_read=mean)", [3]),
+    ]
+    assert {old, new, changed} == {r.path for r in runs.values()}
+
+
+def test_a_config_this_version_cannot_read_is_compared_as_written(tmp_path, make_run):
+    make_run(tmp_path / "a", seed=1, algo__cost_gamma=0.9)  # removed at another value
+    make_run(tmp_path / "b", seed=2)
+    runs = {r.seed: r for r in find_runs(tmp_path)}
+    assert runs[1].settings["algo.cost_gamma"] == 0.9
+    with pytest.raises(ReportError, match=r"algo.cost_gamma: 0.9 .*'<missing>'"):
+        group_runs(list(runs.values()))
 
 
 def test_unfinished_runs_are_kept_and_marked(tmp_path, make_run):
