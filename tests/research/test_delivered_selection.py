@@ -222,3 +222,27 @@ def test_the_preset_is_the_rules_choice():
         key, value = override.split("=")
         assert str(OmegaConf.select(composed, key)) == value, override
     assert validate(composed).algo.lagrangian_eval_window == 0  # aim's window is not part of it
+
+
+def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
+    """goal_budget's runs compose and validate, with 5x the gradient steps per frame and lambda's
+    rate per update cut by as much (lambda updates once per gradient step under experiment=safe),
+    and `--runs` queues only the runs its glob names."""
+    from s3rl_torchrl.trainer import validate
+    from tests.conftest import compose_train
+
+    selection = _script("selection")
+    jobs = [job for job in selection.jobs(tmp_path)
+            if selection.selected(job, tmp_path, "goal_budget/sac_lag_*/seed1")]
+    assert [run_dir for run_dir, _ in jobs] == [
+        tmp_path / "goal_budget" / "sac_lag_SafetyPointGoal1-v0" / "seed1"]
+    overrides = [o for o in jobs[0][1] if not o.startswith(("hydra.", "resume="))]
+    preset = validate(compose_train("experiment=safe", "task=SafetyPointGoal1-v0", "algo=sac_lag"))
+    budget = validate(compose_train(*overrides))
+    assert budget.algo.lagrangian_cadence == preset.algo.lagrangian_cadence == "step"
+    assert budget.algo.update_per_step == 5 * preset.algo.update_per_step == 1.0
+    assert budget.algo.lagrangian_lr * budget.algo.update_per_step == pytest.approx(
+        preset.algo.lagrangian_lr * preset.algo.update_per_step)
+    assert budget.collector.total_frames == 1_000_000
+    assert len([job for job in selection.jobs(tmp_path)
+                if selection.selected(job, tmp_path, "goal_budget/*")]) == 4
