@@ -8,7 +8,8 @@ docs/results.md: the rows of Table 1 (the paper's reward / cost beside ours, las
 best-feasible checkpoint, mean over seeds), rliable's aggregate over the complete tasks, each of
 its probabilities without the task that lowers it most and the one that raises it most, and the
 counts of its cost profiles, recomputed from the runs exported to results/safe_sound and
-results/table1 and from the paper's file.
+results/table1 and from the paper's file; and the paper-settings runs of results/reproduction
+beside the paper's rows.
 
 The research notes (research/2026-11-28-table1-readings.md,
 research/2026-11-28-contrastive-phase-probe.md): the same tables and the status line, each seed's
@@ -62,6 +63,9 @@ PROFILE_THRESHOLDS = (0.0, 0.2, 0.5, 1.0, 2.0)
 PROBE = ROOT / "research" / "results" / "phase_probe"
 PHASE_OFFSET_HEADER = "| frames | gradient steps since the last phase |"
 PHASE_PROBE_HEADER = "| task | algo | seed | at 1M: reward / cost |"
+# experiment=paper's runs (results/reproduction): each (task, algo) with every seed finished.
+REPRODUCTION = RESULTS / "reproduction"
+REPRODUCTION_HEADER = "| task | algo | reward (ours) | reward (paper) |"
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
@@ -123,6 +127,34 @@ def paired(s3rl: dict[int, dict], sac_lag: dict[int, dict], policy: str) -> str:
         # Identical differences on every seed (all zero costs, say) leave the test undefined.
         cells.append(f"{difference:+.2f} (p " + ("undefined)" if math.isnan(p) else f"= {p:.2f})"))
     return " | ".join(cells)
+
+
+def reproduction_rows(tasks: list[str]) -> list[str]:
+    """The paper-settings runs beside the paper's Table 1, in `tasks`' order: mean ± std over
+    the pooled final episodes (population std, as the paper and final_eval.json report them)
+    of each task and algo whose seeds have all finished."""
+    finals: dict[tuple[str, str], dict[int, dict]] = {}
+    for run in find_runs(REPRODUCTION):
+        if run.finished:
+            finals.setdefault((run.task, run.algo), {})[run.seed] = run.final
+    rows = []
+    for task in tasks:
+        for name, algo in ALGOS.items():
+            found = finals.get((task, algo), {})
+            if sorted(found) != list(SEEDS):
+                continue
+            paper = {
+                v.metric: f"{v.mean:.2f} ± {v.std:.2f}"
+                for v in paper_results_for(task)
+                if v.table == "Table 1" and v.algo == algo
+            }
+            cells = []
+            for key, metric in (("episode_rewards", "reward"), ("episode_costs", "cost")):
+                pooled = [value for final in found.values() for value in final[key]]
+                mean, std = statistics.fmean(pooled), statistics.pstdev(pooled)
+                cells += [f"{mean:.2f} ± {std:.2f}", paper[metric]]
+            rows.append(f"| {task} | {name} | " + " | ".join(cells) + " |")
+    return rows
 
 
 def answer(result: Aggregate) -> list[str]:
@@ -294,6 +326,7 @@ def table_rows(tasks: list[str]) -> dict[str, list[str]]:
         PROFILE_HEADER: profile_counts(result),
         PHASE_OFFSET_HEADER: phase_offset_rows(),
         PHASE_PROBE_HEADER: phase_probe_rows(tasks, finals),
+        REPRODUCTION_HEADER: reproduction_rows(tasks),
     }
 
 

@@ -206,7 +206,16 @@ def test_reproduction_row_is_the_pooled_episodes_of_the_paper_settings_runs(row)
     for cell, metric in ((paper_reward, "reward"), (paper_cost, "cost")):
         mean, std = numbers(cell)
         assert close(mean, paper[metric][0]) and close(std, paper[metric][1])
-    assert len(REPRODUCTION) == 4
+
+
+def test_every_complete_paper_settings_group_has_its_row():
+    complete = sorted(
+        tuple(group.name.split("_Safety"))
+        for group in (RESULTS / "reproduction").iterdir()
+        if all((group / f"seed{seed}" / "final_eval.json").exists() for seed in SEEDS)
+    )
+    shown = sorted((ALGOS[algo], task.removeprefix("Safety")) for task, algo, *_ in REPRODUCTION)
+    assert shown == complete
 
 
 def prose() -> list[str]:
