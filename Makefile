@@ -90,9 +90,10 @@ ifneq ($(wildcard results/table1_v2),)
 endif
 
 # What the delivered-policy preset has to reach (issue 60): 46 of 48 runs within the limit per
-# algo, SafetyPointGoal1 at a mean reward >= 20 for a mean cost <= 25, 85% of the reward kept.
+# algo, SafetyPointGoal1 at a mean reward >= 20 for a mean cost <= 25, 85% of the reward kept, and
+# no run stopped to buy its cost (final reward at most 0.1 of its best in training).
 V2_TARGETS = --within s3rl=46 --within sac_lag=46 --task-target SafetyPointGoal1-v0=20,25 \
-	--reward-kept 0.85
+	--reward-kept 0.85 --moving-share 0.1
 
 # S3RL against SAC-Lag on the reproduction's tasks (issue 63) under the paper's settings, under
 # experiment=safe's sound critics with the controller before the delivered-policy preset, and

@@ -7,8 +7,9 @@ new one: mean reward and cost, the runs within the limit, a paired t-test per ta
 cost, over the seeds both ran), and the share of the old reward the new preset keeps. Its
 ``targets`` are the questions a change of preset has to answer (one row each, met or not): how
 many runs deliver a policy within the limit under each preset, whether the new preset keeps at
-least ``reward_kept`` of the old reward wherever the old one held its limit, and, per named task,
-whether the new mean reward and cost reach a bar.
+least ``reward_kept`` of the old reward wherever the old one held its limit, whether its runs
+still move (none buys its cost by giving up the task it had learned: see :class:`Stop`), and,
+per named task, whether the new mean reward and cost reach a bar.
 
 A run is within its limit when its final evaluation's mean cost is at most the run's
 ``task.cost_limit`` (the limit it trained for: 10, or 25 on SafetyPointGoal1).
@@ -34,7 +35,8 @@ from s3rl_torchrl.report.runs import (
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
 
 __all__ = [
-    "BeforeAfter", "Miss", "SeedPair", "Target", "TaskRow", "before_after", "write_markdown"
+    "BeforeAfter", "Miss", "SeedPair", "Stop", "Target", "TaskRow", "before_after",
+    "write_markdown",
 ]
 
 
@@ -127,6 +129,35 @@ def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
 
 
 @dataclass(frozen=True)
+class Stop:
+    """A run that gave up the task it had learned: its final evaluation's reward is at most
+    ``moving_share`` of the best evaluation reward it logged in training (``eval/reward`` in
+    ``metrics.csv``), e.g. SafetyPointGoal1's runs that reached goals by 100k frames and stood
+    still from 600k. A run whose evaluations never earned a positive reward learned nothing to
+    give up, and is not one."""
+
+    side: str  # "before" or "after"
+    task: str
+    algo: str
+    seed: int
+    reward: float  # the protocol's final evaluation
+    best_reward: float  # the best evaluation reward in training
+    best_frames: int  # when it was logged
+
+
+def _stop(run: Run, evaluation: dict, side: str, share: float) -> Stop | None:
+    logged = [row for row in run.metrics if not math.isnan(row.get("eval/reward", math.nan))]
+    if not logged:
+        return None
+    best = max(logged, key=lambda row: row["eval/reward"])
+    reward = float(evaluation["reward_mean"])
+    if best["eval/reward"] <= 0 or reward > share * best["eval/reward"]:
+        return None
+    return Stop(side, run.task, run.algo, run.seed, reward, float(best["eval/reward"]),
+                int(best["frames"]))
+
+
+@dataclass(frozen=True)
 class Target:
     """One question about the new preset, with the numbers that answer it."""
 
@@ -144,6 +175,7 @@ class BeforeAfter:
     # 'unfinished' (a side's run has no evaluation for the protocol)
     unpaired: list[tuple[str, str, int, str]]
     misses: list[Miss] = field(default_factory=list)  # paired runs over the limit after
+    stops: list[Stop] = field(default_factory=list)  # paired runs that gave up their task
 
     def within(self, algo: str, side: str) -> tuple[int, int]:
         rows = [r for r in self.rows if r.algo == algo]
@@ -162,6 +194,7 @@ def before_after(
     within_target: Mapping[str, int] | None = None,
     reward_kept: float = 0.85,
     task_targets: Mapping[str, tuple[float, float]] | None = None,
+    moving_share: float = 0.1,
 ) -> BeforeAfter:
     """Pair the runs of ``before`` and ``after`` (result trees) by task, algo and seed.
 
@@ -174,13 +207,15 @@ def before_after(
             and algo whose old mean cost was within the limit.
         task_targets: task -> (least mean reward, most mean cost) the new preset must reach,
             for each algo.
+        moving_share: a run whose final reward is at most this share of the best evaluation
+            reward it logged in training has stopped (:class:`Stop`); no run may after.
     """
     if protocol not in PROTOCOLS:
         raise ReportError(f"Unknown protocol {protocol!r}; valid: {', '.join(PROTOCOLS)}.")
     old, new = runs_by_key(before), runs_by_key(after)
     paired: dict[tuple[str, str], list[SeedPair]] = {}
     limits: dict[tuple[str, str], float] = {}
-    unpaired, misses = [], []
+    unpaired, misses, stops = [], [], []
     for key in sorted(set(old) | set(new)):
         a = final_evaluation(old[key], protocol) if key in old else None
         b = final_evaluation(new[key], protocol) if key in new else None
@@ -201,13 +236,17 @@ def before_after(
         limits[key[:2]] = new[key].cost_limit
         if float(b["cost_mean"]) > new[key].cost_limit:
             misses.append(_miss(new[key], b, protocol))
+        for side, run, evaluation in (("before", old[key], a), ("after", new[key], b)):
+            stop = _stop(run, evaluation, side, moving_share)
+            if stop is not None:
+                stops.append(stop)
     if not paired:
         raise ReportError(
             "No task, algo and seed has a finished run on both sides: nothing to compare."
         )
     rows = [TaskRow(task, algo, limits[task, algo], pairs)
             for (task, algo), pairs in sorted(paired.items())]
-    result = BeforeAfter(protocol, rows, [], unpaired, misses)
+    result = BeforeAfter(protocol, rows, [], unpaired, misses, stops)
 
     for algo in result.algos:
         within, total = result.within(algo, "after")
@@ -216,6 +255,14 @@ def before_after(
         result.targets.append(Target(
             f"{algo}: runs within the limit (after; before {before_within} of {total})",
             f"{within} of {total} (target >= {need})", within >= need))
+    for algo in result.algos:
+        _, total = result.within(algo, "after")
+        stopped = {side: sum(s.algo == algo and s.side == side for s in stops)
+                   for side in ("before", "after")}
+        result.targets.append(Target(
+            f"{algo}: runs still moving, reward above {moving_share:g} of their best in training "
+            f"(after; before {total - stopped['before']} of {total})",
+            f"{total - stopped['after']} of {total} (target: all)", not stopped["after"]))
     for row in rows:
         if row.mean("before_cost") <= row.cost_limit:
             kept = row.reward_kept
@@ -273,6 +320,13 @@ def write_markdown(result: BeforeAfter, path: str | Path, command: str = "") -> 
                   "| task | algo | seed | cost (limit) | what the run shows |", "|---|---|---|---|---|"]
         lines += [f"| {m.task} | {m.algo} | {m.seed} | {m.cost:.1f} ({m.cost_limit:g}) | {m.reason} |"
                   for m in result.misses]
+    if result.stops:
+        lines += ["", "Runs that stopped (their final reward against the best evaluation reward "
+                  "they logged in training):", "",
+                  "| preset | task | algo | seed | final reward | best in training (frames) |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {s.side} | {s.task} | {s.algo} | {s.seed} | {s.reward:.1f} "
+                  f"| {s.best_reward:.1f} ({s.best_frames}) |" for s in result.stops]
     if result.unpaired:
         lines += ["", f"Not paired ({len(result.unpaired)} runs), by task and algo with their seeds:",
                   ""]

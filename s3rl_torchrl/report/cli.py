@@ -212,6 +212,9 @@ def before_after_main(argv: Sequence[str]) -> int:
     parser.add_argument("--task-target", action="append", default=[], type=_task_target,
                         metavar="TASK=REWARD,COST",
                         help="least mean reward and most mean cost a task must reach after")
+    parser.add_argument("--moving-share", type=float, default=0.1,
+                        help="a run whose final reward is at most this share of its best "
+                             "evaluation reward in training has stopped (default: 0.1)")
     parser.add_argument("--out", type=Path, required=True, help="markdown page")
     parser.add_argument("--json", type=Path, default=None, help="the same as JSON")
     args = parser.parse_args(argv)
@@ -225,6 +228,7 @@ def before_after_main(argv: Sequence[str]) -> int:
         result = before_after(
             args.before, args.after, args.protocol, within_target=dict(args.within),
             reward_kept=args.reward_kept, task_targets=dict(args.task_target),
+            moving_share=args.moving_share,
         )
     except ReportError as err:
         print(f"s3rl-report before-after: error: {err}", file=sys.stderr)
@@ -237,7 +241,8 @@ def before_after_main(argv: Sequence[str]) -> int:
                                "targets": [asdict(t) for t in result.targets],
                                "unpaired": result.unpaired,
                                "misses": [{**asdict(m), "reason": m.reason}
-                                          for m in result.misses]}, command)
+                                          for m in result.misses],
+                               "stops": [asdict(s) for s in result.stops]}, command)
     return 0
 
 

@@ -167,3 +167,31 @@ def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run)
     saved = json.loads(record.read_text())["misses"]
     assert [(m["seed"], m["candidates_within"]) for m in saved] == [(10, 1), (20, 0)]
     assert saved[1]["reason"] == misses[1].reason
+
+
+def test_runs_that_gave_up_their_task_are_counted_and_listed(tmp_path, make_run):
+    # Best evaluation rewards in training (eval/reward): 50 at 200 frames for each run but one.
+    # After: seed 10 ends at 4.0 (<= 0.1 x 50: stopped), seed 20 at 6.0 (moving), seed 30's
+    # evaluations never earned a positive reward (nothing to give up). Before: seed 20 at 5.0
+    # (stopped, exactly at the share), the others at 40.
+    before, after = tmp_path / "before", tmp_path / "after"
+    learned = {"frames": [100, 200, 300], "eval/reward": [10.0, 50.0, 3.0]}
+    never = {"frames": [100, 200, 300], "eval/reward": [-5.0, -2.0, 0.0]}
+    finals = {10: (40, 4), 20: (5, 6), 30: (40, -10)}
+    for seed, (old, new) in finals.items():
+        make_run(before / f"seed{seed}", TASK, "sac_lag", seed, episodes(old, 0), curve=learned)
+        make_run(after / f"seed{seed}", TASK, "sac_lag", seed, episodes(new, 0),
+                 curve=never if seed == 30 else learned)
+    result = before_after([before], [after])
+    assert [(s.side, s.seed, s.reward, s.best_reward, s.best_frames) for s in result.stops] == [
+        ("after", 10, 4.0, 50.0, 200), ("before", 20, 5.0, 50.0, 200)]
+    (moving,) = [t for t in result.targets if "still moving" in t.name]
+    assert "(after; before 2 of 3)" in moving.name
+    assert moving.value == "2 of 3 (target: all)" and not moving.met
+    # A looser share: seed 10 (4 > 0.05 x 50) moves, seed 20 before (5 > 2.5) too.
+    assert before_after([before], [after], moving_share=0.05).stops == []
+    out, record = tmp_path / "page.md", tmp_path / "page.json"
+    assert main(["before-after", "--before", str(before), "--after", str(after),
+                 "--out", str(out), "--json", str(record)]) == 0
+    assert f"| after | {TASK} | sac_lag | 10 | 4.0 | 50.0 (200) |" in out.read_text()
+    assert [s["seed"] for s in json.loads(record.read_text())["stops"]] == [10, 20]
