@@ -8,8 +8,8 @@ docs/results.md: the rows of Table 1 (the paper's reward / cost beside ours, las
 best-feasible checkpoint, mean over seeds), rliable's aggregate over the complete tasks, each of
 its probabilities without the task that lowers it most and the one that raises it most, and the
 counts of its cost profiles, recomputed from the runs exported to results/safe_sound and
-results/table1 and from the paper's file; and the paper-settings runs of results/reproduction
-beside the paper's rows.
+results/table1 and from the paper's file; the paper-settings runs of results/reproduction beside
+the paper's rows, and `s3rl-report gap`'s answer per preset on their tasks.
 
 The research notes (research/2026-11-28-table1-readings.md,
 research/2026-11-28-contrastive-phase-probe.md): the same tables and the status line, each seed's
@@ -66,6 +66,11 @@ PHASE_PROBE_HEADER = "| task | algo | seed | at 1M: reward / cost |"
 # experiment=paper's runs (results/reproduction): each (task, algo) with every seed finished.
 REPRODUCTION = RESULTS / "reproduction"
 REPRODUCTION_HEADER = "| task | algo | reward (ours) | reward (paper) |"
+# S3RL against SAC-Lag per preset on the reproduction's tasks: `s3rl-report gap`'s answers
+# (docs/reproduction/gap_<protocol>.json, written by make report before this script runs).
+GAP_PAGES = {"last": ROOT / "docs" / "reproduction" / "gap_last.json",
+             "delivered": ROOT / "docs" / "reproduction" / "gap_delivered.json"}
+GAP_HEADER = "| setting | policy | tasks | P(S3RL's cost lower) | P(S3RL's reward higher) |"
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
@@ -154,6 +159,21 @@ def reproduction_rows(tasks: list[str]) -> list[str]:
                 mean, std = statistics.fmean(pooled), statistics.pstdev(pooled)
                 cells += [f"{mean:.2f} ± {std:.2f}", paper[metric]]
             rows.append(f"| {task} | {name} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def gap_rows() -> list[str]:
+    """Per protocol and setting, the gap page's answer: rliable's probabilities over the tasks
+    that setting has both algos of (their number), with their bootstrap intervals."""
+    rows = []
+    for policy, path in GAP_PAGES.items():
+        for read in json.loads(path.read_text())["answers"]:
+            cells = [
+                "{:.2f} [{:.2f}, {:.2f}]".format(*(read[key][end] for end in ("point", "low", "high")))
+                for key in ("lower_cost", "higher_reward")
+            ]
+            rows.append(f"| {read['setting']} | {policy} | {len(read['tasks'])} | "
+                        + " | ".join(cells) + " |")
     return rows
 
 
@@ -327,6 +347,7 @@ def table_rows(tasks: list[str]) -> dict[str, list[str]]:
         PHASE_OFFSET_HEADER: phase_offset_rows(),
         PHASE_PROBE_HEADER: phase_probe_rows(tasks, finals),
         REPRODUCTION_HEADER: reproduction_rows(tasks),
+        GAP_HEADER: gap_rows(),
     }
 
 

@@ -337,3 +337,49 @@ def test_the_delivered_policy_selection_is_the_selection_runs():
             assert len(kept) == 14
             cells += [f"{sum(kept)} of {len(kept)}", f"{statistics.median(ratios):.2f}"]
         assert rows[label] == cells, candidate
+
+
+GAP_HEADER = "| setting | policy | tasks | P(S3RL's cost lower) |"
+
+
+def _setting_scores(trees: list[str], task: str, algo: str, policy: str, key: str) -> list[float]:
+    """One value per finished seed of (task, algo) in a setting's trees, under `policy`
+    (delivered: the pick where the run made one, else its last policy)."""
+    scores = []
+    for tree in trees:
+        for seed_dir in sorted((ROOT / tree).glob(f"{algo}_{task}/seed*")):
+            final = json.loads((seed_dir / "final_eval.json").read_text())
+            config = json.loads((seed_dir / "config.json").read_text())
+            if policy == "delivered" and config["eval"].get("delivery_epochs"):
+                final = final["delivered"]
+            scores.append(final[key])
+    return scores
+
+
+def test_the_gap_rows_are_the_gap_pages_answers_counted_from_the_runs():
+    # Each row is `s3rl-report gap`'s answer for one setting and protocol (its JSON beside the
+    # page): the interval as the page gives it, the point estimate recounted here as the mean
+    # over the row's tasks of the share of pairs of runs (S3RL seed, SAC-Lag seed) in which
+    # S3RL's is better, a tie one half.
+    rows = table_rows(TEXT, GAP_HEADER)
+    pages = {policy: json.loads((ROOT / "docs" / "reproduction" / f"gap_{policy}.json")
+                                .read_text()) for policy in ("last", "delivered")}
+    assert len(rows) == sum(len(page["answers"]) for page in pages.values()) >= 4
+    for setting, policy, tasks, cost, reward in rows:
+        page = pages[policy]
+        (read,) = [a for a in page["answers"] if a["setting"] == setting]
+        assert int(tasks) == len(read["tasks"])
+        for cell, name, key, sign in ((cost, "lower_cost", "cost_mean", -1.0),
+                                      (reward, "higher_reward", "reward_mean", 1.0)):
+            point, low, high = numbers(cell)
+            assert close(low, read[name]["low"]) and close(high, read[name]["high"])
+            shares = []
+            for task in read["tasks"]:
+                ours, theirs = (
+                    [sign * v for v in _setting_scores(page["settings"][setting], task, algo,
+                                                       policy, key)]
+                    for algo in ("s3rl", "sac_lag")
+                )
+                pairs = [(a > b) + 0.5 * (a == b) for a in ours for b in theirs]
+                shares.append(sum(pairs) / len(pairs))
+            assert close(point, statistics.mean(shares))
