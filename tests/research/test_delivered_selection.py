@@ -30,6 +30,7 @@ def test_the_committed_table_is_the_exported_runs_table():
     committed = (ROOT / "research" / "delivered_policy" / "selection.md").read_text()
     lines = ["| " + " | ".join(module.HEADER) + " |", "|" + "---|" * len(module.HEADER)]
     lines += ["| " + " | ".join(row) + " |" for row in module.rows(RESULTS)]
+    lines += ["", module.pick_optimism(RESULTS)]
     header = module.CANDIDATE_HEADER
     lines += ["", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     tally = module.candidate_tally(RESULTS, module.committed_rewards())
@@ -132,6 +133,25 @@ def test_each_row_by_hand():
         over = [float(r["eval/cost"]) > limit for r in metrics]
         assert row[7] == f"{sum(train) / len(train):.1f}"
         assert row[8] == f"{sum(over) / len(over):.2f}"
+
+
+def test_the_picks_optimism_by_hand():
+    """selection.md's line on the picks: each pick's reported cost (final_eval.json's
+    `delivered`) minus its candidate's cost on the picking episodes, over every exported pick."""
+    gaps, over = [], 0
+    for final_path in sorted(RESULTS.rglob("final_eval.json")):
+        picked = json.loads(final_path.read_text())["delivered"]
+        limit = json.loads((final_path.parent / "config.json").read_text())["task"]["cost_limit"]
+        (candidate,) = [c for c in picked["candidates"] if c["epoch"] == picked["epoch"]]
+        gaps.append(picked["cost_mean"] - candidate["cost"])
+        over += picked["cost_mean"] > limit
+    gaps.sort()
+    middle = len(gaps) // 2
+    median = gaps[middle] if len(gaps) % 2 else (gaps[middle - 1] + gaps[middle]) / 2
+    line = (f"The picks' reported cost minus their cost on the picking episodes, over {len(gaps)} "
+            f"picks: median {median:+.1f}, mean {sum(gaps) / len(gaps):+.1f}, largest "
+            f"{gaps[-1]:+.1f}; {over} of them over the limit on the reported episodes.")
+    assert line in (ROOT / "research" / "delivered_policy" / "selection.md").read_text()
 
 
 def test_the_notes_critic_table_is_the_runs_metrics():
