@@ -35,6 +35,7 @@ from scipy.stats import ttest_rel
 
 from s3rl_torchrl.report.aggregate import (
     Aggregate,
+    Estimate,
     aggregate,
     probability_of_improvement,
     run_scores,
@@ -168,10 +169,7 @@ def gap_rows() -> list[str]:
     rows = []
     for policy, path in GAP_PAGES.items():
         for read in json.loads(path.read_text())["answers"]:
-            cells = [
-                "{:.2f} [{:.2f}, {:.2f}]".format(*(read[key][end] for end in ("point", "low", "high")))
-                for key in ("lower_cost", "higher_reward")
-            ]
+            cells = [Estimate(**read[key]).cell() for key in ("lower_cost", "higher_reward")]
             rows.append(f"| {read['setting']} | {policy} | {len(read['tasks'])} | "
                         + " | ".join(cells) + " |")
     return rows
