@@ -9,7 +9,8 @@ best-feasible checkpoint, mean over seeds), rliable's aggregate over the complet
 its probabilities without the task that lowers it most and the one that raises it most, and the
 counts of its cost profiles, recomputed from the runs exported to results/safe_sound and
 results/table1 and from the paper's file; the paper-settings runs of results/reproduction beside
-the paper's rows, and `s3rl-report gap`'s answer per preset on their tasks.
+the paper's rows, `s3rl-report gap`'s answer per preset on their tasks, and the delivered-policy
+evidence (results/table1_v2) against its targets, from `s3rl-report before-after`'s pages.
 
 The research notes (research/2026-11-28-table1-readings.md,
 research/2026-11-28-contrastive-phase-probe.md): the same tables and the status line, each seed's
@@ -28,6 +29,7 @@ import argparse
 import csv
 import json
 import math
+import re
 import statistics
 from pathlib import Path
 
@@ -40,6 +42,7 @@ from s3rl_torchrl.report.aggregate import (
     probability_of_improvement,
     run_scores,
 )
+from s3rl_torchrl.report.before_after import TARGET_KINDS
 from s3rl_torchrl.report.paper import paper_results_for
 from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 
@@ -72,6 +75,12 @@ REPRODUCTION_HEADER = "| task | algo | reward (ours) | reward (paper) |"
 GAP_PAGES = {"last": ROOT / "docs" / "reproduction" / "gap_last.json",
              "delivered": ROOT / "docs" / "reproduction" / "gap_delivered.json"}
 GAP_HEADER = "| setting | policy | tasks | P(S3RL's cost lower) | P(S3RL's reward higher) |"
+# Issue 60's evidence against its targets: `s3rl-report before-after`'s targets for the last
+# policy and the delivered pick (docs/table1_v2/before_after_<protocol>.json, written by make
+# report before this script runs), over the runs exported to results/table1_v2 so far.
+BEFORE_AFTER_PAGES = {"last": ROOT / "docs" / "table1_v2" / "before_after_last.json",
+                      "delivered": ROOT / "docs" / "table1_v2" / "before_after_delivered.json"}
+EVIDENCE_HEADER = "| algo | target | before: Table 1's runs | last policy | delivered pick |"
 STATUS = "**Where it stands: "
 ALGOS = {"S3RL": "s3rl", "SAC-Lag": "sac_lag"}
 SEEDS = (10, 20, 30)
@@ -172,6 +181,46 @@ def gap_rows() -> list[str]:
             cells = [Estimate(**read[key]).cell() for key in ("lower_cost", "higher_reward")]
             rows.append(f"| {read['setting']} | {policy} | {len(read['tasks'])} | "
                         + " | ".join(cells) + " |")
+    return rows
+
+
+def evidence_rows() -> list[str]:
+    """Per target kind and algo (and task, for a task's own target), its value under each
+    protocol as the before/after page gives it, beside the same seeds' Table 1 runs (the
+    'before' side, which delivered its last policy); the reward-kept targets, one per task, as
+    the count of tasks that met theirs."""
+    pages = {protocol: json.loads(path.read_text()) for protocol, path in BEFORE_AFTER_PAGES.items()}
+    before = pages["last"]
+    rows = []
+    for kind, label in TARGET_KINDS.items():
+        for name, algo in ALGOS.items():
+            found = {protocol: [t for t in page["targets"] if t["kind"] == kind and t["algo"] == algo]
+                     for protocol, page in pages.items()}
+            paired = [r for r in before["rows"] if r["algo"] == algo]
+            total = sum(len(r["pairs"]) for r in paired)
+            if kind == "reward_kept":
+                cells = [
+                    f"{sum(t['met'] for t in mine)} of {len(mine)} tasks "
+                    f"(each {re.search(r'target >= [0-9.]+', mine[0]['value']).group()})"
+                    if mine else "–"
+                    for mine in found.values()
+                ]
+                rows.append(f"| {name} | {label} | – | " + " | ".join(cells) + " |")
+                continue
+            for task in dict.fromkeys(t["task"] for mine in found.values() for t in mine):
+                if kind == "within":
+                    old = f"{sum(r['within_before'] for r in paired)} of {total}"
+                elif kind == "moving":
+                    stopped = sum(s["algo"] == algo and s["side"] == "before" for s in before["stops"])
+                    old = f"{total - stopped} of {total}"
+                else:
+                    (row,) = [r for r in paired if r["task"] == task]
+                    old = " / ".join(f"{statistics.fmean(p[f'before_{key}'] for p in row['pairs']):.2f}"
+                                     for key in ("reward", "cost"))
+                cells = [next((t["value"] for t in mine if t["task"] == task), "–")
+                         for mine in found.values()]
+                shown = f"{task}: {label}" if task else label
+                rows.append(f"| {name} | {shown} | {old} | " + " | ".join(cells) + " |")
     return rows
 
 
@@ -346,6 +395,7 @@ def table_rows(tasks: list[str]) -> dict[str, list[str]]:
         PHASE_PROBE_HEADER: phase_probe_rows(tasks, finals),
         REPRODUCTION_HEADER: reproduction_rows(tasks),
         GAP_HEADER: gap_rows(),
+        EVIDENCE_HEADER: evidence_rows(),
     }
 
 

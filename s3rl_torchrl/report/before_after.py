@@ -35,7 +35,7 @@ from s3rl_torchrl.report.runs import (
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
 
 __all__ = [
-    "BeforeAfter", "Miss", "SeedPair", "Stop", "Target", "TaskRow", "before_after",
+    "TARGET_KINDS", "BeforeAfter", "Miss", "SeedPair", "Stop", "Target", "TaskRow", "before_after",
     "write_markdown",
 ]
 
@@ -159,11 +159,24 @@ def _stop(run: Run, evaluation: dict, side: str, share: float) -> Stop | None:
 
 @dataclass(frozen=True)
 class Target:
-    """One question about the new preset, with the numbers that answer it."""
+    """One question about the new preset, with the numbers that answer it; ``kind`` says which
+    of TARGET_KINDS it is, for ``algo`` (and ``task`` where it is one task's)."""
 
     name: str
     value: str
     met: bool
+    kind: str = ""
+    algo: str = ""
+    task: str = ""
+
+
+#: The kinds of :class:`Target`, in the order ``before_after`` lists them.
+TARGET_KINDS = {
+    "within": "runs within the limit",
+    "moving": "runs still moving (none stopped to buy its cost)",
+    "reward_kept": "reward kept where the old preset kept its limit",
+    "task": "one task's mean reward and cost",
+}
 
 
 @dataclass
@@ -254,7 +267,7 @@ def before_after(
         need = total if within_target is None else within_target.get(algo, total)
         result.targets.append(Target(
             f"{algo}: runs within the limit (after; before {before_within} of {total})",
-            f"{within} of {total} (target >= {need})", within >= need))
+            f"{within} of {total} (target >= {need})", within >= need, "within", algo))
     for algo in result.algos:
         _, total = result.within(algo, "after")
         stopped = {side: sum(s.algo == algo and s.side == side for s in stops)
@@ -262,14 +275,15 @@ def before_after(
         result.targets.append(Target(
             f"{algo}: runs still moving, reward above {moving_share:g} of their best in training "
             f"(after; before {total - stopped['before']} of {total})",
-            f"{total - stopped['after']} of {total} (target: all)", not stopped["after"]))
+            f"{total - stopped['after']} of {total} (target: all)", not stopped["after"],
+            "moving", algo))
     for row in rows:
         if row.mean("before_cost") <= row.cost_limit:
             kept = row.reward_kept
             result.targets.append(Target(
                 f"{row.algo} {row.task}: reward kept (the old mean cost was within the limit)",
                 f"{kept:.2f} of {row.mean('before_reward'):.1f} (target >= {reward_kept:.2f})",
-                bool(kept >= reward_kept)))
+                bool(kept >= reward_kept), "reward_kept", row.algo, row.task))
     for task, (least_reward, most_cost) in (task_targets or {}).items():
         for row in (r for r in rows if r.task == task):
             reward, cost = row.mean("after_reward"), row.mean("after_cost")
@@ -277,7 +291,7 @@ def before_after(
                 f"{row.algo} {task}: mean reward and cost (after)",
                 f"{reward:.2f} / {cost:.2f} (target reward >= {least_reward:g}, "
                 f"cost <= {most_cost:g})",
-                reward >= least_reward and cost <= most_cost))
+                reward >= least_reward and cost <= most_cost, "task", row.algo, task))
     return result
 
 

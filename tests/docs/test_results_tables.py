@@ -11,6 +11,7 @@ notes' tables are checked in tests/research/test_research_tables.py.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import re
@@ -383,3 +384,75 @@ def test_the_gap_rows_are_the_gap_pages_answers_counted_from_the_runs():
                 pairs = [(a > b) + 0.5 * (a == b) for a in ours for b in theirs]
                 shares.append(sum(pairs) / len(pairs))
             assert close(point, statistics.mean(shares))
+
+
+EVIDENCE_HEADER = "| algo | target | before: Table 1's runs | last policy | delivered pick |"
+EVIDENCE = RESULTS / "table1_v2"
+
+
+def _evidence_pairs(policy: str) -> list[tuple[str, str, dict, dict, float, list[float]]]:
+    """(task, algo, Table 1's final, the evidence run's final under `policy`, the cost limit,
+    its evaluation rewards in training) for every exported evidence run with a Table 1 run of
+    the same task, algo and seed."""
+    pairs = []
+    for final_path in sorted(EVIDENCE.glob("*/seed*/final_eval.json")):
+        run = final_path.parent
+        config = json.loads((run / "config.json").read_text())
+        task, algo = config["task"]["name"], config["algo"]["name"]
+        old = table1_runs(task, algo).get(config["seed"])
+        if old is None:
+            continue
+        final = json.loads(final_path.read_text())
+        if policy == "delivered" and config["eval"].get("delivery_epochs"):
+            final = final["delivered"]
+        with open(run / "metrics.csv") as f:
+            rewards = [float(row["eval/reward"]) for row in csv.DictReader(f) if row["eval/reward"]]
+        pairs.append((task, algo, old, final, config["task"]["cost_limit"], rewards))
+    return pairs
+
+
+def test_the_evidence_rows_are_counted_from_the_runs():
+    # Issue 60's targets over the evidence exported so far, recounted from each run's files: the
+    # runs within their limit, the runs still moving (final reward above the command's
+    # --moving-share of the best evaluation reward in training), the tasks that kept the
+    # command's --reward-kept share of Table 1's mean reward where Table 1's mean cost was within,
+    # and each --task-target task's mean reward / cost.
+    rows = {(algo, target): cells for algo, target, *cells in table_rows(TEXT, EVIDENCE_HEADER)}
+    page = ROOT / "docs" / "table1_v2" / "before_after_last.json"
+    command = json.loads(page.read_text())["command"]
+    moving_share = float(re.search(r"--moving-share ([0-9.]+)", command).group(1))
+    reward_kept = float(re.search(r"--reward-kept ([0-9.]+)", command).group(1))
+    task_targets = re.findall(r"--task-target (\S+)=", command)
+    for name, algo in ALGOS.items():
+        for column, policy in ((1, "last"), (2, "delivered")):
+            pairs = [p for p in _evidence_pairs(policy) if p[1] == algo]
+            assert pairs, algo
+            total = len(pairs)
+            if policy == "last":  # Table 1's side: its runs delivered their last policy
+                old_within = sum(old["cost_mean"] <= limit for _, _, old, _, limit, _ in pairs)
+                assert rows[name, "runs within the limit"][0] == f"{old_within} of {total}"
+            within = sum(new["cost_mean"] <= limit for _, _, _, new, limit, _ in pairs)
+            assert rows[name, "runs within the limit"][column].startswith(f"{within} of {total} ")
+            moving = sum(max(r) <= 0 or new["reward_mean"] > moving_share * max(r)
+                         for _, _, _, new, _, r in pairs)
+            assert rows[name, "runs still moving (none stopped to buy its cost)"][column] \
+                .startswith(f"{moving} of {total} ")
+            by_task: dict[str, list[tuple[dict, dict, float]]] = {}
+            for task, _, old, new, limit, _ in pairs:
+                by_task.setdefault(task, []).append((old, new, limit))
+
+            def mean(runs, side, key):
+                return statistics.fmean(run[side][key] for run in runs)
+
+            met = [mean(runs, 1, "reward_mean") >= reward_kept * mean(runs, 0, "reward_mean")
+                   for runs in by_task.values() if mean(runs, 0, "cost_mean") <= runs[0][2]]
+            cell = rows[name, "reward kept where the old preset kept its limit"][column]
+            assert cell.startswith(f"{sum(met)} of {len(met)} tasks ") if met else cell == "–"
+            for task in task_targets:
+                label = (name, f"{task}: one task's mean reward and cost")
+                if task not in by_task:
+                    assert label not in rows
+                    continue
+                reward, cost = numbers(rows[label][column])[:2]
+                assert close(reward, mean(by_task[task], 1, "reward_mean"))
+                assert close(cost, mean(by_task[task], 1, "cost_mean"))

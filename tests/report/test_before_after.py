@@ -9,7 +9,7 @@ import math
 import pytest
 from scipy import stats
 
-from s3rl_torchrl.report.before_after import before_after
+from s3rl_torchrl.report.before_after import TARGET_KINDS, before_after
 from s3rl_torchrl.report.cli import main
 from s3rl_torchrl.report.runs import ReportError
 from tests.report.conftest import episodes
@@ -67,6 +67,24 @@ def test_task_targets_and_the_best_feasible_protocol(trees, make_run):
     # ... while no run has a best-feasible evaluation: nothing to pair under that protocol.
     with pytest.raises(ReportError, match="nothing to compare"):
         before_after([before], [after], "best_feasible")
+
+
+def test_each_target_names_its_kind_algo_and_task(trees):
+    # What docs/update_table1.py groups the targets by (their JSON carries the same fields): per
+    # algo one "within" and one "moving" target, then one "reward_kept" per task and algo whose
+    # old cost was within the limit (s3rl alone here), one "task" per algo of a named task.
+    before, after = trees
+    result = before_after([before], [after], task_targets={TASK: (100, 6)})
+    assert [(t.kind, t.algo, t.task) for t in result.targets] == [
+        ("within", "s3rl", ""), ("within", "sac_lag", ""),
+        ("moving", "s3rl", ""), ("moving", "sac_lag", ""),
+        ("reward_kept", "s3rl", TASK),
+        ("task", "s3rl", TASK), ("task", "sac_lag", TASK),
+    ]
+    assert {t.kind for t in result.targets} == set(TARGET_KINDS)
+    # The names still say the same: the algo first, and the task where it is one task's.
+    for target in result.targets:
+        assert target.name.startswith(target.algo) and target.task in target.name
 
 
 def test_a_seed_given_twice_or_under_two_limits_is_refused(trees, make_run, tmp_path):
