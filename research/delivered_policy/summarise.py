@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from s3rl_torchrl.report.runs import find_runs
+from s3rl_torchrl.report.runs import find_runs, picked_candidate
 
 ROOT = Path(__file__).resolve().parents[2]
 # The committed runs under experiment=safe: what the issue counts against.
@@ -66,7 +66,7 @@ def rows(root: Path) -> list[list[str]]:
 
 def picking_cost(picked: dict) -> float:
     """The pick's mean cost on the episodes it was picked on (its candidate's entry)."""
-    return next(c["cost"] for c in picked["candidates"] if c["epoch"] == picked["epoch"])
+    return picked_candidate(picked)["cost"]
 
 
 def pick_optimism(root: Path) -> str:

@@ -30,6 +30,7 @@ from s3rl_torchrl.report.runs import (
     Run,
     final_evaluation,
     late_epochs,
+    picked_candidate,
     runs_by_key,
 )
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
@@ -120,7 +121,7 @@ def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
     record = run.final.get("delivered")
     if protocol == "delivered" and record is not None and evaluation is record:
         candidates = record.get("candidates", [])
-        pick = next((c for c in candidates if c["epoch"] == record["epoch"]), None)
+        pick = picked_candidate(record)
         picked = {"pick_cost": pick["cost"] if pick else math.nan, "candidates": len(candidates),
                   "candidates_within": sum(c["cost"] <= record["pick_cost_limit"]
                                            for c in candidates)}

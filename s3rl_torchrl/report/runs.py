@@ -34,6 +34,7 @@ __all__ = [
     "flatten",
     "config_differences",
     "under_protocol",
+    "picked_candidate",
     "runs_by_key",
     "late_epochs",
     "LATE_SHARE",
@@ -214,6 +215,13 @@ def runs_by_key(roots: Sequence[str | Path]) -> dict[tuple[str, str, int], Run]:
                 )
             runs[key] = run
     return runs
+
+
+def picked_candidate(delivered: dict) -> dict | None:
+    """The candidate entry of the policy ``final_eval.json``'s ``delivered`` record picked (its
+    epoch and its reward and cost on the picking episodes), None when the record lists none."""
+    return next((c for c in delivered.get("candidates", []) if c["epoch"] == delivered["epoch"]),
+                None)
 
 
 def final_evaluation(run: Run, protocol: str) -> dict | None:

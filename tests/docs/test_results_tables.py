@@ -423,9 +423,10 @@ def test_the_evidence_rows_are_counted_from_the_runs():
     moving_share = float(re.search(r"--moving-share ([0-9.]+)", command).group(1))
     reward_kept = float(re.search(r"--reward-kept ([0-9.]+)", command).group(1))
     task_targets = re.findall(r"--task-target (\S+)=", command)
+    evidence = {policy: _evidence_pairs(policy) for policy in ("last", "delivered")}
     for name, algo in ALGOS.items():
         for column, policy in ((1, "last"), (2, "delivered")):
-            pairs = [p for p in _evidence_pairs(policy) if p[1] == algo]
+            pairs = [p for p in evidence[policy] if p[1] == algo]
             assert pairs, algo
             total = len(pairs)
             if policy == "last":  # Table 1's side: its runs delivered their last policy
