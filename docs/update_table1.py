@@ -29,7 +29,6 @@ import argparse
 import csv
 import json
 import math
-import re
 import statistics
 from pathlib import Path
 
@@ -201,7 +200,7 @@ def evidence_rows() -> list[str]:
             if kind == "reward_kept":
                 cells = [
                     f"{sum(t['met'] for t in mine)} of {len(mine)} tasks "
-                    f"(each {re.search(r'target >= [0-9.]+', mine[0]['value']).group()})"
+                    f"(each target >= {mine[0]['least']:.2f})"
                     if mine else "–"
                     for mine in found.values()
                 ]

@@ -302,9 +302,8 @@ def reward_anchors(groups: Sequence[RunGroup]) -> dict[str, Anchors]:
                 f"{group.label} seed {run.seed}, {PROTOCOLS[protocol]}"))
         for run in group.runs:
             for frames, reward in zip(*run.column("eval/reward")):
-                if not math.isnan(reward):
-                    logged.setdefault(group.task, []).append(
-                        (reward, f"{group.label} seed {run.seed}, {_frames(frames)} frames"))
+                logged.setdefault(group.task, []).append(
+                    (reward, f"{group.label} seed {run.seed}, {_frames(frames)} frames"))
     anchors = {}
     for task in sorted(finals):
         floor, floor_from = min([(r, w) for r, _, w in finals[task]] + logged.get(task, []),

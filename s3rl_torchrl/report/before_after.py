@@ -147,21 +147,22 @@ class Stop:
 
 
 def _stop(run: Run, evaluation: dict, side: str, share: float) -> Stop | None:
-    logged = [row for row in run.metrics if not math.isnan(row.get("eval/reward", math.nan))]
+    logged = list(zip(*run.column("eval/reward")))
     if not logged:
         return None
-    best = max(logged, key=lambda row: row["eval/reward"])
+    best_frames, best_reward = max(logged, key=lambda point: point[1])
     reward = float(evaluation["reward_mean"])
-    if best["eval/reward"] <= 0 or reward > share * best["eval/reward"]:
+    if best_reward <= 0 or reward > share * best_reward:
         return None
-    return Stop(side, run.task, run.algo, run.seed, reward, float(best["eval/reward"]),
-                int(best["frames"]))
+    return Stop(side, run.task, run.algo, run.seed, reward, float(best_reward), int(best_frames))
 
 
 @dataclass(frozen=True)
 class Target:
     """One question about the new preset, with the numbers that answer it; ``kind`` says which
-    of TARGET_KINDS it is, for ``algo`` (and ``task`` where it is one task's)."""
+    of TARGET_KINDS it is, for ``algo`` (and ``task`` where it is one task's); ``least`` is the
+    least value that meets it (a count of runs for ``within``, a share of the old reward for
+    ``reward_kept``), None where the target is 'all' or a pair of bounds."""
 
     name: str
     value: str
@@ -169,6 +170,7 @@ class Target:
     kind: str = ""
     algo: str = ""
     task: str = ""
+    least: float | None = None
 
 
 #: The kinds of :class:`Target`, in the order ``before_after`` lists them.
@@ -268,7 +270,8 @@ def before_after(
         need = total if within_target is None else within_target.get(algo, total)
         result.targets.append(Target(
             f"{algo}: runs within the limit (after; before {before_within} of {total})",
-            f"{within} of {total} (target >= {need})", within >= need, "within", algo))
+            f"{within} of {total} (target >= {need})", within >= need, "within", algo,
+            least=need))
     for algo in result.algos:
         _, total = result.within(algo, "after")
         stopped = {side: sum(s.algo == algo and s.side == side for s in stops)
@@ -284,7 +287,7 @@ def before_after(
             result.targets.append(Target(
                 f"{row.algo} {row.task}: reward kept (the old mean cost was within the limit)",
                 f"{kept:.2f} of {row.mean('before_reward'):.1f} (target >= {reward_kept:.2f})",
-                bool(kept >= reward_kept), "reward_kept", row.algo, row.task))
+                bool(kept >= reward_kept), "reward_kept", row.algo, row.task, reward_kept))
     for task, (least_reward, most_cost) in (task_targets or {}).items():
         for row in (r for r in rows if r.task == task):
             reward, cost = row.mean("after_reward"), row.mean("after_cost")

@@ -330,7 +330,7 @@ def _last_logged(group: RunGroup, column: str) -> MeanStd:
     """The last logged value of a metrics.csv column in each finished run, over seeds."""
     last = []
     for run in group.finished:
-        values = [v for v in run.column(column)[1] if not math.isnan(v)]
+        values = run.column(column)[1]
         if values:
             last.append(values[-1])
     return MeanStd.of(last, ddof=1)

@@ -131,8 +131,9 @@ class Run:
             return flatten(written)
 
     def column(self, name: str) -> tuple[list[float], list[float]]:
-        """(frames, values) of a metrics.csv column (rows without the column are skipped)."""
-        rows = [r for r in self.metrics if name in r]
+        """(frames, values) of a metrics.csv column where it holds a number: rows without the
+        column, its empty cells and NaN (e.g. the probe before both classes exist) are skipped."""
+        rows = [r for r in self.metrics if not math.isnan(r.get(name, math.nan))]
         return [r["frames"] for r in rows], [r[name] for r in rows]
 
 

@@ -229,13 +229,12 @@ def learning_curve(group: RunGroup, column: str) -> tuple[np.ndarray, np.ndarray
 
     At each frame count the runs that logged it enter (an unfinished run stops adding points
     where it stopped); the std is over those runs (``ddof=0``, 0 for one run); NaN values
-    (e.g. the probe before both classes exist) are left out.
+    (e.g. the probe before both classes exist) are left out (:meth:`Run.column`).
     """
     by_frames: dict[float, list[float]] = {}
     for run in group.runs:
         for frames, value in zip(*run.column(column)):
-            if not math.isnan(value):
-                by_frames.setdefault(frames, []).append(value)
+            by_frames.setdefault(frames, []).append(value)
     frames = np.array(sorted(by_frames))
     mean = np.array([np.mean(by_frames[f]) for f in frames])
     std = np.array([np.std(by_frames[f]) for f in frames])

@@ -73,13 +73,16 @@ def test_each_target_names_its_kind_algo_and_task(trees):
     # What docs/update_table1.py groups the targets by (their JSON carries the same fields): per
     # algo one "within" and one "moving" target, then one "reward_kept" per task and algo whose
     # old cost was within the limit (s3rl alone here), one "task" per algo of a named task.
+    # ``least`` is the bar as a number: the runs needed (1 of s3rl's one pair, 2 of sac_lag's
+    # three as asked), the share of the old reward; none for 'all' and for a pair of bounds.
     before, after = trees
-    result = before_after([before], [after], task_targets={TASK: (100, 6)})
-    assert [(t.kind, t.algo, t.task) for t in result.targets] == [
-        ("within", "s3rl", ""), ("within", "sac_lag", ""),
-        ("moving", "s3rl", ""), ("moving", "sac_lag", ""),
-        ("reward_kept", "s3rl", TASK),
-        ("task", "s3rl", TASK), ("task", "sac_lag", TASK),
+    result = before_after([before], [after], within_target={"sac_lag": 2}, reward_kept=0.9,
+                          task_targets={TASK: (100, 6)})
+    assert [(t.kind, t.algo, t.task, t.least) for t in result.targets] == [
+        ("within", "s3rl", "", 1), ("within", "sac_lag", "", 2),
+        ("moving", "s3rl", "", None), ("moving", "sac_lag", "", None),
+        ("reward_kept", "s3rl", TASK, 0.9),
+        ("task", "s3rl", TASK, None), ("task", "sac_lag", TASK, None),
     ]
     assert {t.kind for t in result.targets} == set(TARGET_KINDS)
     # The names still say the same: the algo first, and the task where it is one task's.
