@@ -41,7 +41,7 @@ from s3rl_torchrl.report.aggregate import (
     probability_of_improvement,
     run_scores,
 )
-from s3rl_torchrl.report.before_after import TARGET_KINDS
+from s3rl_torchrl.report.before_after import MISS_CAUSES, TARGET_KINDS
 from s3rl_torchrl.report.paper import paper_results_for
 from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 
@@ -183,11 +183,15 @@ def gap_rows() -> list[str]:
     return rows
 
 
+#: The evidence table's last rows: each algo's runs over the limit, counted by MISS_CAUSES.
+MISSES_LABEL = "runs over the limit, by what their files show"
+
+
 def evidence_rows() -> list[str]:
     """Per target kind and algo (and task, for a task's own target), its value under each
     protocol as the before/after page gives it, beside the same seeds' Table 1 runs (the
     'before' side, which delivered its last policy); the reward-kept targets, one per task, as
-    the count of tasks that met theirs."""
+    the count of tasks that met theirs; last, each algo's misses counted by their cause."""
     pages = {protocol: json.loads(path.read_text()) for protocol, path in BEFORE_AFTER_PAGES.items()}
     before = pages["last"]
     rows = []
@@ -220,6 +224,13 @@ def evidence_rows() -> list[str]:
                          for mine in found.values()]
                 shown = f"{task}: {label}" if task else label
                 rows.append(f"| {name} | {shown} | {old} | " + " | ".join(cells) + " |")
+    for name, algo in ALGOS.items():
+        cells = []
+        for page in pages.values():
+            causes = [m["cause"] for m in page["misses"] if m["algo"] == algo]
+            cells.append(", ".join(f"{causes.count(cause)} {label}" for cause, label
+                                   in MISS_CAUSES.items() if cause in causes) or "none")
+        rows.append(f"| {name} | {MISSES_LABEL} | – | " + " | ".join(cells) + " |")
     return rows
 
 

@@ -85,6 +85,17 @@ class TaskRow:
         return self.mean("after_reward") / before if before > 0 else math.nan
 
 
+#: Why a run is over its limit under the new preset, as :attr:`Miss.cause` reads its files: its
+#: last policy's training cost (what the multiplier held) within the limit or over it; for a pick,
+#: whether any kept policy was within the limit on the picking episodes.
+MISS_CAUSES = {
+    "training_within": "training cost within the limit",
+    "training_over": "training cost over it",
+    "pick_none_within": "no kept policy within",
+    "pick_reported_over": "pick within on its own episodes",
+}
+
+
 @dataclass(frozen=True)
 class Miss:
     """A run over its limit under the new preset, with what its own files say about why: the
@@ -100,6 +111,13 @@ class Miss:
     pick_cost: float | None = None  # the pick's cost on its picking episodes
     candidates_within: int | None = None  # kept policies within the pick's limit
     candidates: int | None = None
+
+    @property
+    def cause(self) -> str:
+        """The run's key of MISS_CAUSES."""
+        if self.candidates is not None:
+            return "pick_reported_over" if self.candidates_within else "pick_none_within"
+        return "training_over" if self.training_cost > self.cost_limit else "training_within"
 
     @property
     def reason(self) -> str:

@@ -240,7 +240,7 @@ def before_after_main(argv: Sequence[str]) -> int:
         write_json(args.json, {"protocol": result.protocol, "rows": rows,
                                "targets": [asdict(t) for t in result.targets],
                                "unpaired": result.unpaired,
-                               "misses": [{**asdict(m), "reason": m.reason}
+                               "misses": [{**asdict(m), "reason": m.reason, "cause": m.cause}
                                           for m in result.misses],
                                "stops": [asdict(s) for s in result.stops]}, command)
     return 0

@@ -3,13 +3,14 @@ numbers computed by hand and scipy's paired t-test."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
 import pytest
 from scipy import stats
 
-from s3rl_torchrl.report.before_after import TARGET_KINDS, before_after
+from s3rl_torchrl.report.before_after import MISS_CAUSES, TARGET_KINDS, before_after
 from s3rl_torchrl.report.cli import main
 from s3rl_torchrl.report.runs import ReportError
 from tests.report.conftest import episodes
@@ -177,10 +178,16 @@ def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run)
     assert misses[0].reason.startswith("picked at 4.0 on its picking episodes (1 of 2 within), "
                                        "14.0 on the reported ones")
     assert misses[1].reason.startswith("none of the 2 kept policies was within the limit")
-    # The last policies (cost 20 each, all over): the training cost only.
+    assert [m.cause for m in misses] == ["pick_reported_over", "pick_none_within"]
+    # The last policies (cost 20 each, all over): the training cost only, 10.0 at the limit of
+    # 10, within it as a cost of 10 is (0.5 more is over).
     last = before_after([before], [after], "last").misses
     assert [m.seed for m in last] == [10, 20, 30] and last[0].pick_cost is None
     assert last[0].reason == "training cost 10.0 over the last 20% of epochs"
+    assert {m.cause for m in last} == {"training_within"}
+    assert dataclasses.replace(last[0], training_cost=10.5).cause == "training_over"
+    assert set(MISS_CAUSES) == {"training_within", "training_over", "pick_reported_over",
+                                "pick_none_within"}
     out, record = tmp_path / "page.md", tmp_path / "page.json"
     assert main(["before-after", "--before", str(before), "--after", str(after),
                  "--protocol", "delivered", "--out", str(out), "--json", str(record)]) == 0
@@ -188,6 +195,7 @@ def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run)
     saved = json.loads(record.read_text())["misses"]
     assert [(m["seed"], m["candidates_within"]) for m in saved] == [(10, 1), (20, 0)]
     assert saved[1]["reason"] == misses[1].reason
+    assert [m["cause"] for m in saved] == ["pick_reported_over", "pick_none_within"]
 
 
 def test_runs_that_gave_up_their_task_are_counted_and_listed(tmp_path, make_run):
