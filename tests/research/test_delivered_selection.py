@@ -245,24 +245,30 @@ def test_the_preset_is_the_rules_choice():
 
 
 def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
-    """goal_budget's runs compose and validate, with 5x the gradient steps per frame and lambda's
-    rate per update cut by as much (lambda updates once per gradient step under experiment=safe),
-    and `--runs` queues only the runs its glob names."""
+    """goal_budget's run (retired after SAC-Lag seed 1) composes and validates, with 5x the
+    gradient steps per frame and lambda's rate per update cut by as much (lambda updates once
+    per gradient step under experiment=safe); with every SafetyPointGoal1 candidate retired the
+    queue holds none of its runs, and `--runs` queues only the runs its glob names."""
     from s3rl_torchrl.trainer import validate
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    jobs = [job for job in selection.jobs(tmp_path)
-            if selection.selected(job, tmp_path, "goal_budget/sac_lag_*/seed1")]
-    assert [run_dir for run_dir, _ in jobs] == [
-        tmp_path / "goal_budget" / "sac_lag_SafetyPointGoal1-v0" / "seed1"]
-    overrides = [o for o in jobs[0][1] if not o.startswith(("hydra.", "resume="))]
-    preset = validate(compose_train("experiment=safe", "task=SafetyPointGoal1-v0", "algo=sac_lag"))
-    budget = validate(compose_train(*overrides))
+    assert not selection.GOAL_CANDIDATES
+    assert set(selection.RETIRED_GOAL_CANDIDATES) == {"goal_mean", "goal_bound", "goal_split",
+                                                      "goal_budget"}
+    task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
+    preset = validate(compose_train("experiment=safe", *task))
+    budget = validate(compose_train(
+        "experiment=safe", *task, *selection.RETIRED_GOAL_CANDIDATES["goal_budget"]))
     assert budget.algo.lagrangian_cadence == preset.algo.lagrangian_cadence == "step"
     assert budget.algo.update_per_step == 5 * preset.algo.update_per_step == 1.0
     assert budget.algo.lagrangian_lr * budget.algo.update_per_step == pytest.approx(
         preset.algo.lagrangian_lr * preset.algo.update_per_step)
-    assert budget.collector.total_frames == 1_000_000
-    assert len([job for job in selection.jobs(tmp_path)
-                if selection.selected(job, tmp_path, "goal_budget/*")]) == 4
+    jobs = list(selection.jobs(tmp_path))
+    assert not [run_dir for run_dir, _ in jobs if "SafetyPointGoal1" in str(run_dir)]
+    picked = [run_dir for run_dir, _ in jobs
+              if selection.selected((run_dir, []), tmp_path, "margin/sac_lag_*/seed1")]
+    assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
+                      for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
+                                   "SafetyBallRun-v0")]
+    assert len(jobs) == 2 * 2 * 7  # two candidates, two seeds, seven cases
