@@ -122,13 +122,15 @@ class Miss:
     @property
     def reason(self) -> str:
         held = f"training cost {self.training_cost:.1f} over the last 20% of epochs"
-        if self.candidates is None:
-            return held
-        if not self.candidates_within:
+        cause = self.cause
+        if cause == "pick_none_within":
             return (f"none of the {self.candidates} kept policies was within the limit on its "
                     f"picking episodes (the cheapest: {self.pick_cost:.1f}); {held}")
-        return (f"picked at {self.pick_cost:.1f} on its picking episodes ({self.candidates_within}"
-                f" of {self.candidates} within), {self.cost:.1f} on the reported ones; {held}")
+        if cause == "pick_reported_over":
+            return (f"picked at {self.pick_cost:.1f} on its picking episodes "
+                    f"({self.candidates_within} of {self.candidates} within), {self.cost:.1f} "
+                    f"on the reported ones; {held}")
+        return held
 
 
 def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
