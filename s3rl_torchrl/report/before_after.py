@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from s3rl_torchrl.envs.registry import TASKS
 from s3rl_torchrl.report.runs import (
     PROTOCOLS,
     ReportError,
@@ -111,6 +112,15 @@ class Miss:
     pick_cost: float | None = None  # the pick's cost on its picking episodes
     candidates_within: int | None = None  # kept policies within the pick's limit
     candidates: int | None = None
+    # The reported episodes' mean length and the task's time limit (None: not a registered
+    # task): a policy whose episodes end before it, e.g. a walker that falls, pays its cost in
+    # bursts that the training cost (a mean over whole training episodes) does not show.
+    length: float = math.nan
+    max_length: int | None = None
+
+    @property
+    def ends_early(self) -> bool:
+        return self.max_length is not None and self.length < self.max_length
 
     @property
     def cause(self) -> str:
@@ -124,13 +134,18 @@ class Miss:
         held = f"training cost {self.training_cost:.1f} over the last 20% of epochs"
         cause = self.cause
         if cause == "pick_none_within":
-            return (f"none of the {self.candidates} kept policies was within the limit on its "
-                    f"picking episodes (the cheapest: {self.pick_cost:.1f}); {held}")
-        if cause == "pick_reported_over":
-            return (f"picked at {self.pick_cost:.1f} on its picking episodes "
-                    f"({self.candidates_within} of {self.candidates} within), {self.cost:.1f} "
-                    f"on the reported ones; {held}")
-        return held
+            reason = (f"none of the {self.candidates} kept policies was within the limit on its "
+                      f"picking episodes (the cheapest: {self.pick_cost:.1f}); {held}")
+        elif cause == "pick_reported_over":
+            reason = (f"picked at {self.pick_cost:.1f} on its picking episodes "
+                      f"({self.candidates_within} of {self.candidates} within), {self.cost:.1f} "
+                      f"on the reported ones; {held}")
+        else:
+            reason = held
+        if self.ends_early:
+            reason += (f"; its episodes end early ({self.length:.0f} of {self.max_length} steps "
+                       "on average)")
+        return reason
 
 
 def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
@@ -145,8 +160,10 @@ def _miss(run: Run, evaluation: dict, protocol: str) -> Miss:
         picked = {"pick_cost": pick["cost"] if pick else math.nan, "candidates": len(candidates),
                   "candidates_within": sum(c["cost"] <= record["pick_cost_limit"]
                                            for c in candidates)}
+    spec = TASKS.get(run.task)
     return Miss(run.task, run.algo, run.seed, float(evaluation["cost_mean"]), run.cost_limit,
-                training_cost, **picked)
+                training_cost, **picked, length=float(evaluation.get("length_mean", math.nan)),
+                max_length=spec.max_episode_steps if spec else None)
 
 
 @dataclass(frozen=True)

@@ -157,18 +157,22 @@ def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run)
     # After (limit 10): seed 10's pick was within the limit on its picking episodes (candidates
     # at costs 4 and 30: 1 of 2 within) but costs 14 on the reported ones; seed 20 kept no
     # policy within (candidates 18, 12: the cheapest picked); seed 30 is within (no row).
-    # Training cost: 10 epochs, the last 20% (2 epochs) at 9 and 11 -> 10.0.
+    # Training cost: 10 epochs, the last 20% (2 epochs) at 9 and 11 -> 10.0. Episode lengths:
+    # seed 10's last policy runs HalfCheetah's full 1000 steps, the others end at 50.
     before, after = tmp_path / "before", tmp_path / "after"
     curve = {"frames": list(range(100, 1100, 100)), "train/cost": [50.0] * 8 + [9.0, 11.0]}
     picks = {10: (14, 9, [(9, 4.0), (10, 30.0)]), 20: (13, 10, [(9, 18.0), (10, 12.0)]),
              30: (3, 10, [(9, 3.0), (10, 2.0)])}
     for seed, (cost, epoch, candidates) in picks.items():
         make_run(before / f"seed{seed}", TASK, "sac_lag", seed, episodes(100, 20))
-        run = make_run(after / f"seed{seed}", TASK, "sac_lag", seed, episodes(100, 20),
+        last = episodes(100, 20)
+        if seed == 10:
+            last["lengths"] = [1000, 1000]
+        run = make_run(after / f"seed{seed}", TASK, "sac_lag", seed, last,
                        curve=curve, eval__delivery_epochs=2)
         final = json.loads((run / "final_eval.json").read_text())
         final["delivered"] = {"reward_mean": 90.0, "cost_mean": float(cost),
-                              "epoch": epoch, "pick_cost_limit": 10.0,
+                              "epoch": epoch, "pick_cost_limit": 10.0, "length_mean": 1000.0,
                               "candidates": [{"epoch": e, "frames": 100 * e, "reward": 1.0,
                                               "cost": c} for e, c in candidates]}
         (run / "final_eval.json").write_text(json.dumps(final))
@@ -184,6 +188,13 @@ def test_runs_over_the_limit_after_say_what_their_files_show(tmp_path, make_run)
     last = before_after([before], [after], "last").misses
     assert [m.seed for m in last] == [10, 20, 30] and last[0].pick_cost is None
     assert last[0].reason == "training cost 10.0 over the last 20% of epochs"
+    # Seed 20's episodes end at 50 of HalfCheetah's 1000 steps (the registry's time limit).
+    assert (last[1].length, last[1].max_length, last[1].ends_early) == (50.0, 1000, True)
+    assert last[1].reason == ("training cost 10.0 over the last 20% of epochs; its episodes end "
+                              "early (50 of 1000 steps on average)")
+    assert not last[0].ends_early and not misses[0].ends_early
+    # A task the registry does not know has no time limit to compare with.
+    assert not dataclasses.replace(last[1], max_length=None).ends_early
     assert {m.cause for m in last} == {"training_within"}
     assert dataclasses.replace(last[0], training_cost=10.5).cause == "training_over"
     assert set(MISS_CAUSES) == {"training_within", "training_over", "pick_reported_over",
