@@ -474,16 +474,17 @@ def _evidence_miss_causes() -> dict[str, dict[str, Counter]]:
         if config["seed"] not in table1_runs(task, algo):
             continue
         final = json.loads(final_path.read_text())
-        with open(run / "metrics.csv") as f:
-            epochs = [row["train/cost"] for row in csv.DictReader(f)]
-        late = [float(c) for c in epochs[-max(1, round(0.2 * len(epochs))):] if c]
-        training = ("training cost over it" if statistics.fmean(late) > limit
-                    else "training cost within the limit")
+        picked = bool(config["eval"].get("delivery_epochs"))
         if final["cost_mean"] > limit:
+            with open(run / "metrics.csv") as f:
+                epochs = [row["train/cost"] for row in csv.DictReader(f)]
+            late = [float(c) for c in epochs[-max(1, round(0.2 * len(epochs))):] if c]
+            training = ("training cost over it" if statistics.fmean(late) > limit
+                        else "training cost within the limit")
             causes["last"][algo][training] += 1
-        if not config["eval"].get("delivery_epochs"):
-            if final["cost_mean"] > limit:
+            if not picked:
                 causes["delivered"][algo][training] += 1
+        if not picked:
             continue
         pick = final["delivered"]
         if pick["cost_mean"] > limit:
