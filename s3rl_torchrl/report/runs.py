@@ -130,6 +130,14 @@ class Run:
         except (ValueError, OmegaConfBaseException):  # ConfigError is a ValueError
             return flatten(written)
 
+    def late_mean(self, name: str) -> float:
+        """The mean of a metrics.csv column over the last 20% of epochs (:func:`late_epochs` of
+        the rows), its empty cells and NaN skipped; NaN when none holds a number. Of
+        ``train/cost``, the cost the multiplier held at the end of training."""
+        values = [v for v in late_epochs([r.get(name, math.nan) for r in self.metrics])
+                  if not math.isnan(v)]
+        return sum(values) / len(values) if values else math.nan
+
     def column(self, name: str) -> tuple[list[float], list[float]]:
         """(frames, values) of a metrics.csv column where it holds a number: rows without the
         column, its empty cells and NaN (e.g. the probe before both classes exist) are skipped."""

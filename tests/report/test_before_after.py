@@ -59,6 +59,31 @@ def test_pairs_by_seed_and_counts_runs_within_the_limit(trees):
     assert "0.80 of 50.0" in kept[0].value
 
 
+def test_a_reward_miss_shows_the_training_reward_kept_beside_it(tmp_path, make_run):
+    # Two seeds within the limit before (cost 5). Their final rewards: before 100 and 60, after
+    # 40 and 20 (kept: 30 / 80 = 0.375). Training reward over the last 20% of 10 epochs (the last
+    # two): before (70 + 90) / 2 = 80 and 50 (mean 65), after 60 and (30 + 50) / 2 = 40 (mean
+    # 50): 50 / 65 = 0.77 of it kept in training, the rest lost at the final evaluation.
+    before, after = tmp_path / "before", tmp_path / "after"
+    frames = list(range(100, 1100, 100))
+    runs = {10: ((100, [0.0] * 8 + [70.0, 90.0]), (40, [0.0] * 8 + [60.0, 60.0])),
+            20: ((60, [0.0] * 8 + [50.0, 50.0]), (20, [0.0] * 8 + [30.0, 50.0]))}
+    for seed, ((old_reward, old_curve), (new_reward, new_curve)) in runs.items():
+        make_run(before / f"seed{seed}", TASK, "s3rl", seed, episodes(old_reward, 5),
+                 curve={"frames": frames, "train/reward": old_curve})
+        make_run(after / f"seed{seed}", TASK, "s3rl", seed, episodes(new_reward, 5),
+                 curve={"frames": frames, "train/reward": new_curve})
+    result = before_after([before], [after])
+    (row,) = result.rows
+    assert [(p.before_training_reward, p.after_training_reward) for p in row.pairs] == [
+        (80.0, 60.0), (50.0, 40.0)]
+    assert row.reward_kept == pytest.approx(30 / 80)
+    assert row.kept("training_reward") == pytest.approx(50 / 65)
+    (kept,) = [t for t in result.targets if t.kind == "reward_kept"]
+    assert not kept.met
+    assert kept.value == "0.38 of 80.0 (target >= 0.85); training reward 0.77 of 65.0"
+
+
 def test_task_targets_and_the_best_feasible_protocol(trees, make_run):
     before, after = trees
     result = before_after([before], [after], task_targets={TASK: (100, 6)})

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -105,3 +106,17 @@ def test_unreadable_config_names_the_run(tmp_path, make_run):
     (run / "config.json").write_text("{not json")
     with pytest.raises(ReportError, match="Cannot read the run in"):
         find_runs(tmp_path)
+
+
+def test_late_mean_averages_the_last_fifth_of_epochs_skipping_empty_cells(tmp_path, make_run):
+    # Ten epochs: the last 20% are the last two rows. Their numbers, by hand: (7 + 9) / 2; one
+    # empty cell among them leaves the other; a column no row holds, or none of the late rows,
+    # gives NaN.
+    curve = {"frames": list(range(100, 1100, 100)),
+             "train/cost": [50.0] * 8 + [7.0, 9.0],
+             "train/reward": [1.0] * 8 + ["", 4.0],
+             "probe/auc": [0.5] * 8 + ["", ""]}
+    (run,) = find_runs(make_run(tmp_path / "run", curve=curve))
+    assert run.late_mean("train/cost") == pytest.approx(8.0)
+    assert run.late_mean("train/reward") == pytest.approx(4.0)
+    assert math.isnan(run.late_mean("probe/auc")) and math.isnan(run.late_mean("eval/missing"))
