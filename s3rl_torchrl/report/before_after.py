@@ -329,8 +329,9 @@ def before_after(
             value = f"{kept:.2f} of {row.mean('before_reward'):.1f} (target >= {reward_kept:.2f})"
             # Beside it, the share of the training reward: close to the evaluation's, the reward
             # was lost in training; well above it, at the final evaluation alone.
-            if not math.isnan(row.kept("training_reward")):
-                value += (f"; training reward {row.kept('training_reward'):.2f} of "
+            training = row.kept("training_reward")
+            if not math.isnan(training):
+                value += (f"; training reward {training:.2f} of "
                           f"{row.mean('before_training_reward'):.1f}")
             result.targets.append(Target(
                 f"{row.algo} {row.task}: reward kept (the old mean cost was within the limit)",
