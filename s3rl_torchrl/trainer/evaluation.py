@@ -48,15 +48,17 @@ class EvalResult:
 
 
 def episode_statistics(rollout: TensorDictBase) -> list[tuple[float, float, int, int]]:
-    """Per finished episode of a ``[num_envs, T]`` rollout: (reward, cost, length, safe steps).
+    """Per episode of a ``[num_envs, T]`` rollout: (reward, cost, length, safe steps).
 
-    An episode ends at ``("next", "done")`` or, if still running, at the rollout's last step
-    (so evaluation with a short ``max_steps`` cuts episodes there).
+    An episode ends at ``("next", "done")``. Still running at the rollout's last step, an env
+    copy's first episode is kept, cut there (evaluation with a ``max_steps`` shorter than the
+    task's episode); an episode that began after a reset inside the rollout is dropped: the
+    rollout cut it, not the task, and counting it would report the short, cheap remainder that
+    follows a robot's fall as a whole episode.
     """
     reward = rollout["next", "reward"].sum(-1)
     cost = rollout["next", "cost"].sum(-1)
-    done = rollout["next", "done"].squeeze(-1).clone()
-    done[..., -1] = True
+    done = rollout["next", "done"].squeeze(-1)
     episodes = []
     for env_reward, env_cost, env_done in zip(
         reward.reshape(-1, reward.shape[-1]).tolist(),
@@ -74,6 +76,8 @@ def episode_statistics(rollout: TensorDictBase) -> list[tuple[float, float, int,
                 episodes.append((ep_reward, ep_cost, length, safe))
                 ep_reward = ep_cost = 0.0
                 length = safe = 0
+        if length == len(env_done):
+            episodes.append((ep_reward, ep_cost, length, safe))
     return episodes
 
 
@@ -86,7 +90,8 @@ def evaluate(
     """Run ``policy`` deterministically on ``env`` until ``episodes`` episodes have ended.
 
     Rollouts of ``max_steps`` steps start from a reset; each copy of a batched env contributes
-    every episode it finishes, in order, and the first ``episodes`` are kept.
+    every episode it finishes, in order (:func:`episode_statistics`), and the first ``episodes``
+    are kept.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}.")
