@@ -1,6 +1,7 @@
-"""episode_statistics and evaluate against hand-built rollouts: a ``[num_envs, T]`` rollout
-is split into episodes at ``("next", "done")``, and an episode that a reset inside the rollout
-began and the rollout's end cut is not an episode."""
+"""episode_statistics and evaluate against hand-built rollouts: each env copy of a
+``[num_envs, T]`` rollout gives its first episode, up to its first ``("next", "done")``; what
+follows a reset inside the rollout is not counted (cut by the rollout, or whole only because it
+was short)."""
 
 import torch
 from tensordict import TensorDict
@@ -24,19 +25,16 @@ def _rollout(rewards, costs, dones) -> TensorDict:
     )
 
 
-def test_the_remainder_after_a_fall_is_not_counted():
+def test_each_copy_gives_its_first_episode_only():
     # Env 0 falls after 2 steps; the rollout then runs 4 steps of a new episode and ends: that
-    # remainder is not an episode. Env 1 ends two episodes, the second at the task's time limit.
+    # remainder is not an episode. Env 1 ends two episodes; the second fitted in the rollout
+    # only because the first was short, so it is not counted either.
     rollout = _rollout(
         rewards=[[1, 2, 3, 4, 5, 6], [1, 1, 1, 2, 2, 2]],
         costs=[[0, 1, 0, 0, 0, 0], [1, 0, 0, 0, 1, 1]],
         dones=[[0, 1, 0, 0, 0, 0], [0, 0, 1, 0, 0, 1]],
     )
-    assert episode_statistics(rollout) == [
-        (3.0, 1.0, 2, 1),
-        (3.0, 1.0, 3, 2),
-        (6.0, 2.0, 3, 1),
-    ]
+    assert episode_statistics(rollout) == [(3.0, 1.0, 2, 1), (3.0, 1.0, 3, 2)]
 
 
 def test_an_episode_longer_than_the_rollout_is_kept_cut_at_its_end():
