@@ -13,13 +13,14 @@ with one, the mean cost and reward as committed, and over the complete episodes 
 
 from __future__ import annotations
 
-import json
 import statistics
 import sys
 from pathlib import Path
 
 from s3rl_torchrl.envs.registry import get_task
+from s3rl_torchrl.report.runs import find_runs
 
+# The final_eval.json record of each policy (s3rl_torchrl.report.runs.PROTOCOLS), by its label.
 POLICIES = {"last": None, "delivered pick": "delivered", "best-feasible": "best_feasible"}
 
 
@@ -44,15 +45,14 @@ def main(trees: list[str]) -> None:
     print("|---|---|---|---:|---|---|")
     for tree in trees:
         counts = {}
-        for final in sorted(Path(tree).glob("*/seed*/final_eval.json")):
-            config = json.loads((final.parent / "config.json").read_text())
-            max_steps = (
-                config["eval"].get("max_steps")
-                or get_task(config["task"]["name"]).max_episode_steps
-            )
-            evaluation = json.loads(final.read_text())
+        for run in find_runs(tree):
+            if run.final is None:
+                continue
+            max_steps = run.config["eval"].get("max_steps") or get_task(run.task).max_episode_steps
             for policy, key in POLICIES.items():
-                result = evaluation if key is None else evaluation.get(key)
+                # Not final_evaluation(): it stands a run without a pick's last policy in for
+                # its pick, which would count that evaluation twice here.
+                result = run.final if key is None else run.final.get(key)
                 if not result or "episode_lengths" not in result:
                     continue
                 flags = remainders(result["episode_lengths"], max_steps)
@@ -63,10 +63,10 @@ def main(trees: list[str]) -> None:
                 whole = [i for i, flag in enumerate(flags) if not flag]
                 cost = statistics.fmean(result["episode_costs"][i] for i in whole)
                 reward = statistics.fmean(result["episode_rewards"][i] for i in whole)
-                run = f"{final.parent.parent.name} seed {final.parent.name[4:]}"
                 print(
-                    f"| {Path(tree).name} | {policy} | {run} | {sum(flags)} | "
-                    f"{result['cost_mean']:.1f} / {cost:.1f} | {result['reward_mean']:.0f} / {reward:.0f} |"
+                    f"| {Path(tree).name} | {policy} | {run.algo}_{run.task} seed {run.seed} | "
+                    f"{sum(flags)} | {result['cost_mean']:.1f} / {cost:.1f} | "
+                    f"{result['reward_mean']:.0f} / {reward:.0f} |"
                 )
         for policy, (total, hit) in counts.items():
             print(
