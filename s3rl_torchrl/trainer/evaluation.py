@@ -48,33 +48,30 @@ class EvalResult:
 
 
 def episode_statistics(rollout: TensorDictBase) -> list[tuple[float, float, int, int]]:
-    """Per finished episode of a ``[num_envs, T]`` rollout: (reward, cost, length, safe steps).
+    """Per env copy of a ``[num_envs, T]`` rollout that began at a reset: its first episode's
+    (reward, cost, length, safe steps).
 
-    An episode ends at ``("next", "done")`` or, if still running, at the rollout's last step
-    (so evaluation with a short ``max_steps`` cuts episodes there).
+    The episode ends at the copy's first ``("next", "done")`` or, still running, at the
+    rollout's last step (a ``max_steps`` shorter than the task's episode cuts it there). A
+    copy's later episodes are not counted: one that began after a reset inside the rollout is
+    whole only if it ends before the rollout does, so counting it would favour short episodes
+    (a robot that falls early), and the remainder the rollout cuts is no episode. Sums are in
+    float64, as the per-step rewards summed in Python before.
     """
-    reward = rollout["next", "reward"].sum(-1)
-    cost = rollout["next", "cost"].sum(-1)
+    reward = rollout["next", "reward"].sum(-1).double()
+    cost = rollout["next", "cost"].sum(-1).double()
     done = rollout["next", "done"].squeeze(-1).clone()
     done[..., -1] = True
-    episodes = []
-    for env_reward, env_cost, env_done in zip(
-        reward.reshape(-1, reward.shape[-1]).tolist(),
-        cost.reshape(-1, cost.shape[-1]).tolist(),
-        done.reshape(-1, done.shape[-1]).tolist(),
-    ):
-        ep_reward = ep_cost = 0.0
-        length = safe = 0
-        for r, c, d in zip(env_reward, env_cost, env_done):
-            ep_reward += r
-            ep_cost += c
-            length += 1
-            safe += c == 0
-            if d:
-                episodes.append((ep_reward, ep_cost, length, safe))
-                ep_reward = ep_cost = 0.0
-                length = safe = 0
-    return episodes
+    end = done.to(torch.uint8).argmax(-1, keepdim=True)  # each copy's first done step
+    in_episode = torch.arange(done.shape[-1], device=done.device) <= end
+    return list(
+        zip(
+            reward.where(in_episode, 0.0).sum(-1).reshape(-1).tolist(),
+            cost.where(in_episode, 0.0).sum(-1).reshape(-1).tolist(),
+            (end + 1).reshape(-1).tolist(),
+            ((cost == 0) & in_episode).sum(-1).reshape(-1).tolist(),
+        )
+    )
 
 
 def evaluate(
@@ -86,7 +83,7 @@ def evaluate(
     """Run ``policy`` deterministically on ``env`` until ``episodes`` episodes have ended.
 
     Rollouts of ``max_steps`` steps start from a reset; each copy of a batched env contributes
-    every episode it finishes, in order, and the first ``episodes`` are kept.
+    its first episode (:func:`episode_statistics`), and the first ``episodes`` are kept.
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}.")

@@ -11,7 +11,13 @@ of this kind the resumed runs differ from them by up to 1.2e-5 relative (PPO-Lag
 ``train/loss_objective``; S3RL 1.6e-6, DDPG-Lag 1.6e-7) although every resume is exact there. So
 the numbers are compared within :data:`REL`. That a resume continues a run bit for bit is
 checked where both runs are made on one machine, a resumed run against the same run never
-stopped, by ``tests/trainer/test_resume.py``."""
+stopped, by ``tests/trainer/test_resume.py``.
+
+The expected final evaluations count episodes by today's rule (each env copy's first episode of
+a rollout: ``episode_statistics``), which the old code did not: ``make_old_checkpoints.py
+--expected-only`` remade ``expected/`` with that code and today's rule in its place (2026-12-01).
+Their ``metrics.csv`` came out unchanged but for ``eval/seconds``: one episode per epoch is the
+same by both rules."""
 
 from __future__ import annotations
 
