@@ -1,8 +1,8 @@
 """Which committed final evaluations counted a rollout's cut remainder as an episode.
 
-``episode_statistics`` (``s3rl_torchrl/trainer/evaluation.py``) closes every env copy's last
-episode at the rollout's end: after a fall, the fresh episode that follows
-is counted, cut at ``eval.max_steps`` total steps. Each row of a rollout sums to
+Until 2026-12-01 ``episode_statistics`` (``s3rl_torchrl/trainer/evaluation.py``) closed every
+env copy's last episode at the rollout's end: after a fall, the fresh episode that followed was
+counted, cut at ``eval.max_steps`` total steps (it now takes each copy's first episode only). Each row of a rollout sums to
 ``max_steps``, so the stored ``episode_lengths`` show which entries were such remainders (the
 last of a row that is not its first). For each result tree and policy this prints the runs
 with one, the mean cost and reward as committed, and over the complete episodes among them

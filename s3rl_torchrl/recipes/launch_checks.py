@@ -11,7 +11,9 @@ first:
   must be writable and, for a new run, hold no other run; the directory's lock is then taken
   (trainer/run_lock.py), which the trainer takes over;
 - a sweep (:meth:`LaunchChecks.on_multirun_start`): every job's config is composed as the
-  launcher will compose it and validated, and the bad ones are named together; the sweep's
+  launcher will compose it and validated, and the bad ones are named together; no two jobs may
+  train into one directory (a sweep over a key the directory's name leaves out, such as
+  ``algo.lagrangian_target=0.5,0.7`` under the default ``<algo>_<task>_seed<N>``); the sweep's
   directory must be writable; ``hydra/launcher=slurm`` needs Slurm's ``sbatch``.
 
 A command refused here prints one line per problem on stderr (``s3rl-train: ...``), writes
@@ -26,7 +28,7 @@ import shutil
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NamedTuple, NoReturn
 
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, open_dict, read_write
@@ -34,7 +36,9 @@ from omegaconf import DictConfig, open_dict, read_write
 from s3rl_torchrl.recipes.unknown_options import describe_unknown_option
 from s3rl_torchrl.trainer.run_lock import LOCK_FILE, RunInUseError, RunLock
 
-__all__ = ["RUN_FILES", "LaunchChecks", "job_problem", "sweep_overrides"]
+__all__ = [
+    "RUN_FILES", "LaunchChecks", "SweepJob", "job_problem", "sweep_jobs", "sweep_overrides",
+]
 
 # What a run writes at its directory's top level (trainer/loop.py, multiseed.py): a directory
 # holding one of them holds a run.
@@ -112,12 +116,23 @@ class LaunchChecks(Callback):
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         jobs = sweep_jobs(config)
         if jobs is not None:
-            bad = [(overrides, problem) for overrides, problem in jobs if problem is not None]
+            bad = [job for job in jobs if job.problem is not None]
             if bad:
                 refuse(
                     f"{len(bad)} of the sweep's {len(jobs)} jobs would be refused, so none was "
                     "started:",
-                    *(f"  {' '.join(overrides) or '(no overrides)'}: {p}" for overrides, p in bad),
+                    *(f"  {_named(job)}: {job.problem}" for job in bad),
+                )
+            shared = _shared_run_dirs(jobs)
+            if shared:
+                refuse(
+                    f"{sum(map(len, shared.values()))} of the sweep's {len(jobs)} jobs would "
+                    "train into a directory another of them trains into, so none was started:",
+                    *(f"  {run_dir}: {' | '.join(map(_named, group))}"
+                      for run_dir, group in shared.items()),
+                    "Name each job's directory by what the jobs differ in, e.g. "
+                    "hydra.sweep.subdir='${hydra.job.override_dirname}', or by its number: "
+                    "hydra.sweep.subdir='job${hydra.job.num}' (docs/recipes.md, \"Sweeps\").",
                 )
         sweep_dir = Path(str(config.hydra.sweep.dir))
         _check_writable(sweep_dir, "Give a directory you can write: hydra.sweep.dir=<dir>.")
@@ -160,10 +175,18 @@ def claim_run_dir(run_dir: Path, config: DictConfig, continues: bool) -> RunLock
     return RunLock.claim(run_dir, check=holds_no_other_run)
 
 
-def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
-    """Every job of the sweep, as the basic sweeper splits it and the launcher composes it:
-    ``(its overrides, why the recipe would refuse it or None)``. None for another sweeper
-    (e.g. Optuna's, whose jobs are chosen as it goes)."""
+class SweepJob(NamedTuple):
+    """One job of a sweep, as the launcher will compose it."""
+
+    overrides: list[str]
+    problem: str | None  # why the recipe would refuse it, or None
+    run_dir: Path | None  # where it would train; None where its config or directory does not resolve
+
+
+def sweep_jobs(config: DictConfig) -> list[SweepJob] | None:
+    """Every job of the sweep, as the basic sweeper splits it and the launcher composes it
+    (the job's number set as the launcher sets it, so that its directory resolves). None for
+    another sweeper (e.g. Optuna's, whose jobs are chosen as it goes)."""
     from hydra.core.global_hydra import GlobalHydra
 
     if str(config.hydra.sweeper.get("_target_", "")) != BASIC_SWEEPER:
@@ -173,15 +196,41 @@ def sweep_jobs(config: DictConfig) -> list[tuple[list[str], str | None]] | None:
     arguments = [f"{key}={value}" for key, value in params.items()]
     arguments += list(config.hydra.overrides.task)
     jobs = []
-    for overrides in sweep_overrides(arguments, loader):
+    for num, overrides in enumerate(sweep_overrides(arguments, loader)):
         try:
             job_config = loader.load_sweep_config(config, list(overrides))
         except Exception as err:  # a value of the wrong type, an unknown key: Hydra's message
             problem = describe_unknown_option(err, "s3rl-train")
-            jobs.append((list(overrides), problem or str(err).strip().splitlines()[0]))
+            jobs.append(SweepJob(list(overrides), problem or str(err).strip().splitlines()[0], None))
             continue
-        jobs.append((list(overrides), job_problem(job_config)))
+        jobs.append(SweepJob(list(overrides), job_problem(job_config), _job_dir(job_config, num)))
     return jobs
+
+
+def _job_dir(job_config: DictConfig, num: int) -> Path | None:
+    """Where the launcher runs job ``num`` (hydra/_internal/core_plugins/basic_launcher.py and
+    the joblib launcher number their jobs in launch order), or None if that does not resolve
+    before the job starts (a directory named by ``hydra.runtime.output_dir``, say)."""
+    with read_write(job_config), open_dict(job_config):
+        job_config.hydra.job.num = num
+        job_config.hydra.job.id = str(num)
+    try:
+        return Path(str(job_config.hydra.sweep.dir)) / str(job_config.hydra.sweep.subdir)
+    except Exception:  # an interpolation Hydra fills in only as the job starts
+        return None
+
+
+def _shared_run_dirs(jobs: list[SweepJob]) -> dict[Path, list[SweepJob]]:
+    """The run directories that more than one job would train into, with those jobs."""
+    by_dir: dict[Path, list[SweepJob]] = {}
+    for job in jobs:
+        if job.run_dir is not None:
+            by_dir.setdefault(job.run_dir, []).append(job)
+    return {run_dir: group for run_dir, group in by_dir.items() if len(group) > 1}
+
+
+def _named(job: SweepJob) -> str:
+    return " ".join(job.overrides) or "(no overrides)"
 
 
 def sweep_overrides(arguments: Iterable[str], config_loader: Any = None) -> list[list[str]]:

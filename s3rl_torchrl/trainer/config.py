@@ -426,6 +426,16 @@ def run_dir_name(seed: int, seeds: list[int] | None) -> str:
     return f"seeds{'-'.join(map(str, seeds))}" if seeds else f"seed{seed}"
 
 
+def sweep_trial(sweeper: str, job_num: int) -> str:
+    """What tells a sweep's jobs apart in their default directory beyond algo, task and seed:
+    nothing under Hydra's basic sweeper (its jobs are known before any starts, and the launch
+    checks refuse two that would share a directory), ``_trial<N>`` (the job's number) under a
+    sweeper that chooses its jobs as it goes, such as Optuna's, whose trials share algo, task and
+    seed; ``${s3rl_trial:${hydra.runtime.choices.hydra/sweeper},${hydra.job.num}}`` in
+    configs/train.yaml."""
+    return "" if sweeper == "basic" else f"_trial{job_num}"
+
+
 def hydra_run_dir(resume: str | None, algo: str, task: str, seeds: str, now: str) -> str:
     """Where ``s3rl-train`` runs: ``outputs/<algo>/<task>/<seed10 | seeds10-20>/<time>``, or,
     for a resume, ``<run>/resumes/<time>`` (that invocation's Hydra files and log, beside the
@@ -482,8 +492,10 @@ def register_configs() -> None:
     ``s3rl_episode_frames`` and ``s3rl_round_up`` (``experiment=paper``'s collects and epochs),
     ``s3rl_lagrangian`` (``experiment=safe``'s controller, for constrained algorithms only),
     ``s3rl_safe_cost_limit`` and ``s3rl_safe_setting`` (``experiment=safe``'s per-task limit
-    and settings, from its table: ``trainer/presets.py``)."""
+    and settings, from its table: ``trainer/presets.py``), ``s3rl_trial`` (a search's trials in a
+    sweep's default directories)."""
     OmegaConf.register_new_resolver("s3rl_run_name", run_dir_name, replace=True)
+    OmegaConf.register_new_resolver("s3rl_trial", sweep_trial, replace=True)
     OmegaConf.register_new_resolver("s3rl_run_dir", hydra_run_dir, replace=True)
     OmegaConf.register_new_resolver("s3rl_episode_frames", episode_frames, replace=True)
     OmegaConf.register_new_resolver("s3rl_round_up", round_up, replace=True)

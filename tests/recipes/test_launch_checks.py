@@ -204,7 +204,37 @@ def test_a_valid_sweep_passes(tmp_path):
                        task=["experiment=tiny", "algo=sac,sac_lag", "seed=1,2"])
         jobs = checks.sweep_jobs(cfg)
         checks.LaunchChecks().on_multirun_start(cfg)
-    assert len(jobs) == 4 and all(problem is None for _, problem in jobs)
+    assert len(jobs) == 4 and all(job.problem is None for job in jobs)
+    # Each in a directory of its own, named as configs/train.yaml names it under the basic
+    # sweeper (no trial number).
+    assert [job.run_dir for job in jobs] == [
+        tmp_path / "multirun" / f"{algo}_SafetyHalfCheetahVelocity-v1_seed{seed}"
+        for algo in ("sac", "sac_lag") for seed in (1, 2)
+    ]
+
+
+def test_a_sweep_whose_jobs_share_a_directory_starts_none(tmp_path, capsys):
+    # A sweep over a key the default directory's name leaves out: both values of the target
+    # would train into <algo>_<task>_seed1, the second refusing the first's files mid-sweep.
+    sweep_dir = tmp_path / "multirun"
+    with hydra_app():
+        cfg = composed("experiment=tiny", f"hydra.sweep.dir={sweep_dir}",
+                       task=["experiment=tiny", "algo.lagrangian_target=0.5,0.7", "seed=1"])
+        lines = refused(capsys, lambda: checks.LaunchChecks().on_multirun_start(cfg))
+        assert lines[0] == ("s3rl-train: 2 of the sweep's 2 jobs would train into a directory "
+                            "another of them trains into, so none was started:")
+        shared = sweep_dir / "s3rl_SafetyHalfCheetahVelocity-v1_seed1"
+        assert lines[1] == (f"s3rl-train:   {shared}: experiment=tiny algo.lagrangian_target=0.5 "
+                            "seed=1 | experiment=tiny algo.lagrangian_target=0.7 seed=1")
+        assert "hydra.sweep.subdir='job${hydra.job.num}'" in lines[2]
+        assert not sweep_dir.exists()
+        # Either advice gives each job its own directory, and the sweep passes.
+        for subdir in ("${hydra.job.override_dirname}", "job${hydra.job.num}"):
+            cfg = composed("experiment=tiny", f"hydra.sweep.dir={sweep_dir}",
+                           f"hydra.sweep.subdir={subdir}",
+                           task=["experiment=tiny", "algo.lagrangian_target=0.5,0.7", "seed=1"])
+            checks.LaunchChecks().on_multirun_start(cfg)
+            assert len({job.run_dir for job in checks.sweep_jobs(cfg)}) == 2
 
 
 def test_a_sweeps_jobs_are_its_parameters_product_the_first_varying_slowest():
