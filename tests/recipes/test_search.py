@@ -40,6 +40,7 @@ def test_a_two_trial_search_records_each_trials_objective(tmp_path):
         cwd=tmp_path, capture_output=True, text=True, timeout=600,
     )
     assert done.returncode == 0, done.stderr[-3000:]
+    assert "setup plugin alembic" not in done.stdout + done.stderr  # configs/train.yaml quiets it
     trials = sorted(p for p in sweep.iterdir() if p.is_dir())
     assert [p.name for p in trials] == [
         f"sac_lag_SafetyHalfCheetahVelocity-v1_seeds1-2_trial{n}" for n in (0, 1)
