@@ -1,4 +1,5 @@
-"""A command-line key the config does not have: which keys its node does have.
+"""A command-line key the config does not have: which keys its node does have; an option a Hydra
+plugin brings, while the plugin is not installed: which extra installs it.
 
 Hydra refuses ``s3rl-train algo.actor_lrr=1e-3`` (or ``s3rl-eval eval.episodes=1``, the training
 command's key) with "Could not override 'algo.actor_lrr'", a suggestion to append the key with
@@ -6,7 +7,10 @@ command's key) with "Could not override 'algo.actor_lrr'", a suggestion to appen
 'SACConfig'": the problem, but not the valid choices. :func:`describe_unknown_option` turns
 that error into one line naming the keys the node has and the closest one; the recipes print
 it after Hydra's message (:func:`hint_unknown_option`), and a sweep's refused jobs carry it
-(:mod:`s3rl_torchrl.recipes.launch_checks`).
+(:mod:`s3rl_torchrl.recipes.launch_checks`). Without Hydra's Optuna sweeper, ``+search=...`` or
+``hydra/sweeper=optuna`` stops on "Could not find 'hydra/sweeper/optuna'" (available: basic), which
+does not say where the option comes from: :func:`describe_missing_plugin` names the package and
+this package's extra.
 """
 
 from __future__ import annotations
@@ -17,10 +21,21 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from hydra.errors import MissingConfigException
 from omegaconf import DictConfig
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError
 
-__all__ = ["describe_unknown_option", "hint_unknown_option"]
+__all__ = ["PLUGIN_OPTIONS", "describe_missing_plugin", "describe_unknown_option",
+           "hint_unknown_option"]
+
+#: The Hydra options a plugin brings (configs/hydra/launcher/*.yaml build on the launchers'),
+#: with the plugin's package and the extra of pyproject.toml that installs it.
+PLUGIN_OPTIONS = {
+    "hydra/sweeper/optuna": ("hydra-optuna-sweeper", "search"),
+    "hydra/launcher/joblib": ("hydra-joblib-launcher", "sweep"),
+    "hydra/launcher/submitit_slurm": ("hydra-submitit-launcher", "sweep"),
+    "hydra/launcher/submitit_local": ("hydra-submitit-launcher", "sweep"),
+}
 
 _OVERRIDE = re.compile(r"To append to your config use \+(?P<line>\S.*)$", re.MULTILINE)
 
@@ -71,6 +86,17 @@ def describe_unknown_option(err: BaseException, command: str) -> str | None:
     return line
 
 
+def describe_missing_plugin(err: BaseException) -> str | None:
+    """For Hydra's refusal of an option that one of :data:`PLUGIN_OPTIONS`' plugins brings: one
+    line naming the plugin and the command that installs it. None for any other error."""
+    if not isinstance(err, MissingConfigException) or err.missing_cfg_file not in PLUGIN_OPTIONS:
+        return None
+    package, extra = PLUGIN_OPTIONS[err.missing_cfg_file]
+    return (f"'{err.missing_cfg_file}' comes with Hydra's plugin {package}, which is not "
+            f"installed: pip install 's3rl-torchrl[{extra}]' (in a checkout: pip install -e "
+            f"'.[{extra}]'; `make setup` installs it).")
+
+
 def _first_job_overrides(arguments: list[str]) -> list[str]:
     """The command's overrides with each sweep (``seed=1,2``) at its first value: one job."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -114,7 +140,8 @@ def _composition_error(config_name: str, arguments: list[str]) -> Exception | No
 @contextmanager
 def hint_unknown_option(command: str, config_name: str) -> Iterator[None]:
     """Around a recipe's Hydra main: when Hydra stops (status 1) on a key the config does not
-    have, print after its message the line of :func:`describe_unknown_option`. Hydra prints
+    have, or an option of a plugin not installed, print after its message the line of
+    :func:`describe_unknown_option` or :func:`describe_missing_plugin`. Hydra prints
     and exits before the exception could be read, so the command's config is composed once
     more, only then."""
     try:
@@ -122,7 +149,9 @@ def hint_unknown_option(command: str, config_name: str) -> Iterator[None]:
     except SystemExit as stop:
         if stop.code == 1:
             err = _composition_error(config_name, sys.argv[1:])
-            hint = describe_unknown_option(err, command) if err is not None else None
+            hint = None
+            if err is not None:
+                hint = describe_unknown_option(err, command) or describe_missing_plugin(err)
             if hint is not None:
                 print(f"{command}: {hint}", file=sys.stderr)
         raise

@@ -105,3 +105,42 @@ def test_a_sweeps_refused_jobs_name_it(tmp_path, capsys):
         f"{fields(SACConfig)}. Did you mean algo.n_step={value}?"
         for value in ("1", "3")
     ]
+
+
+@pytest.mark.parametrize(
+    "argv, option, package, extra",
+    [
+        (["-m", "+search=lagrangian_target", "experiment=tiny"], "hydra/sweeper/optuna",
+         "hydra-optuna-sweeper", "search"),
+        (["-m", "hydra/launcher=parallel", "experiment=tiny"], "hydra/launcher/joblib",
+         "hydra-joblib-launcher", "sweep"),
+    ],
+)
+def test_an_option_of_a_plugin_not_installed_names_its_extra(
+    argv, option, package, extra, tmp_path, monkeypatch, capsys
+):
+    from hydra.core.config_store import ConfigStore
+    from hydra.core.plugins import Plugins
+
+    from s3rl_torchrl.recipes import train as train_recipe
+
+    # A plugin registers its options in Hydra's ConfigStore when Hydra imports it: without
+    # them, Hydra stops as it does where the plugin is not installed.
+    register_configs()
+    Plugins.instance()
+    group, name = option.rsplit("/", 1)
+    monkeypatch.delitem(ConfigStore.instance().repo["hydra"][group.split("/")[1]],
+                        f"{name}.yaml", raising=False)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["s3rl-train", *argv])
+    with pytest.raises(SystemExit) as stop:
+        train_recipe.main()
+    assert stop.value.code == 1  # Hydra's status
+    err = capsys.readouterr().err.strip().splitlines()
+    assert any(f"'{option}'" in line for line in err[:-1])  # Hydra's own message stays
+    assert err[-1] == (
+        f"s3rl-train: '{option}' comes with Hydra's plugin {package}, which is not installed: "
+        f"pip install 's3rl-torchrl[{extra}]' (in a checkout: pip install -e '.[{extra}]'; "
+        "`make setup` installs it)."
+    )
+    assert list(tmp_path.iterdir()) == []
