@@ -9,7 +9,8 @@ It runs only with that version of the code (it forces the ``critic_eval`` keywor
 episode of a rollout, ``s3rl_torchrl/trainer/evaluation.py`` of this checkout, loaded by path):
 the old rule also counted the episodes after a fall, and a resumed run evaluates by today's.
 ``--expected-only`` rewrites ``<case>/expected/`` alone and keeps the stopped runs: their one
-episode per epoch is the same by both rules (2026-12-01, after the evaluation change). For each case, ``<case>/run/`` is the stopped run's directory
+episode per epoch is the same by both rules (2026-12-01, after the evaluation change). For each
+case, ``<case>/run/`` is the stopped run's directory
 (``config.json`` in the flat ``AlgoConfig`` of that version, ``metrics.csv``, its checkpoints)
 and ``<case>/expected/`` the ``metrics.csv`` and ``final_eval.json`` of the same command never
 stopped. ``tests/trainer/test_old_checkpoints.py`` resumes each run with today's code and
