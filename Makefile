@@ -23,7 +23,8 @@ $(STAMP): pyproject.toml constraints.txt Makefile
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	@if [ -n "$(TORCH_SPEC)" ]; then \
-		echo "$(TORCH_SPEC)" > $(VENV)/constraints.txt; \
+		grep -v '^torch==' constraints.txt > $(VENV)/constraints.txt; \
+		echo "$(TORCH_SPEC)" >> $(VENV)/constraints.txt; \
 	else \
 		cp constraints.txt $(VENV)/constraints.txt; \
 	fi

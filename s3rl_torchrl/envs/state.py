@@ -33,14 +33,39 @@ import torch
 from torchrl.envs import EnvBase, TransformedEnv
 
 __all__ = [
+    "MUJOCO_VERSION",
+    "SnapshotMismatch",
     "env_snapshot",
     "exact_restore_unsupported",
     "generator_state",
     "restore_env",
     "set_generator_state",
+    "snapshot_mujoco_problem",
 ]
 
 SNAPSHOT_VERSION = 1
+#: The MuJoCo release this process simulates with, recorded in every snapshot: MuJoCo's
+#: serialised ``MjData`` is read only by the release that wrote it.
+MUJOCO_VERSION = mujoco.__version__
+
+
+class SnapshotMismatch(ValueError):
+    """A snapshot this env cannot take back (another MuJoCo release, another number of copies,
+    another task's state)."""
+
+
+def snapshot_mujoco_problem(snapshot: dict[str, Any] | None) -> str | None:
+    """Why this process cannot restore ``snapshot`` when it was written by another MuJoCo
+    release, or None (the same release, no snapshot, or one written before releases were
+    recorded: :func:`restore_env` then finds out when MuJoCo refuses it)."""
+    written = (snapshot or {}).get("mujoco")
+    if written is None or written == MUJOCO_VERSION:
+        return None
+    return (
+        f"its simulator state was written by MuJoCo {written} and this is MuJoCo "
+        f"{MUJOCO_VERSION}, which cannot read it: resume with mujoco=={written} (the project "
+        "pins its release in constraints.txt), or start the run again"
+    )
 
 
 def _gym_copies(env: EnvBase) -> list[gym.Env] | str:
@@ -143,11 +168,18 @@ def _restore_copy(copy: gym.Env, state: dict[str, Any]) -> None:
     env = copy.unwrapped
     restore_extra = getattr(env, "restore_extra", None)
     if ("extra" in state) != (restore_extra is not None):
-        raise ValueError(f"the snapshot does not match {type(env).__name__}'s state")
+        raise SnapshotMismatch(f"the snapshot does not match {type(env).__name__}'s state")
     if restore_extra is not None:
         restore_extra(state["extra"])  # model fields first: they may recompute constants
     saved = mujoco.MjData.__new__(mujoco.MjData)
-    saved.__setstate__(state["data"].numpy().tobytes())
+    try:
+        saved.__setstate__(state["data"].numpy().tobytes())
+    except ValueError as err:  # "Invalid serialized mjModel": another release wrote it
+        raise SnapshotMismatch(
+            f"MuJoCo {MUJOCO_VERSION} cannot read the snapshot's simulator state ({err}); it "
+            "was written by another MuJoCo release or is damaged: resume with the release "
+            "that wrote it (the project pins it in constraints.txt), or start the run again"
+        ) from err
     mujoco.mj_copyData(env.data, env.model, saved)
     set_generator_state(env.np_random, state["np_random"])
     _set_wrapper_state(copy, state["wrappers"])
@@ -159,7 +191,11 @@ def env_snapshot(env: EnvBase) -> dict[str, Any] | None:
     if exact_restore_unsupported(env) is not None:
         return None
     copies = _gym_copies(env)
-    return {"version": SNAPSHOT_VERSION, "copies": [_copy_snapshot(c) for c in copies]}
+    return {
+        "version": SNAPSHOT_VERSION,
+        "mujoco": MUJOCO_VERSION,
+        "copies": [_copy_snapshot(c) for c in copies],
+    }
 
 
 def restore_env(env: EnvBase, snapshot: dict[str, Any]) -> None:
@@ -167,9 +203,12 @@ def restore_env(env: EnvBase, snapshot: dict[str, Any]) -> None:
     reason = exact_restore_unsupported(env)
     if reason is not None:
         raise ValueError(f"this env cannot be restored exactly: {reason}")
+    problem = snapshot_mujoco_problem(snapshot)
+    if problem is not None:
+        raise SnapshotMismatch(f"the env snapshot cannot be restored: {problem}")
     copies = _gym_copies(env)
     if snapshot.get("version") != SNAPSHOT_VERSION or len(snapshot["copies"]) != len(copies):
-        raise ValueError(
+        raise SnapshotMismatch(
             f"the env snapshot holds {len(snapshot.get('copies', []))} copies (version "
             f"{snapshot.get('version')}); this env has {len(copies)} (version {SNAPSHOT_VERSION})"
         )

@@ -34,7 +34,11 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from s3rl_torchrl.envs.state import exact_restore_unsupported
+from s3rl_torchrl.envs.state import (
+    SnapshotMismatch,
+    exact_restore_unsupported,
+    snapshot_mujoco_problem,
+)
 from s3rl_torchrl.trainer.checkpoint import (
     GROUP_FILE,
     REPLAY_DIR,
@@ -234,6 +238,18 @@ def check_group(run_dir: Path, seeds: list[int]) -> None:
         )
 
 
+def check_simulator(state: dict[str, Any]) -> None:
+    """Refuse a checkpoint whose env snapshots (the test envs', the training envs', a hook's)
+    another MuJoCo release wrote: this one cannot read them (envs/state.py)."""
+    hooks = state.get("hooks") or {}
+    snapshots = [state.get("test_env"), (state.get("collector") or {}).get("train_env")]
+    snapshots += [hook.get("env") for hook in hooks.values() if isinstance(hook, dict)]
+    for snapshot in snapshots:
+        problem = snapshot_mujoco_problem(snapshot if isinstance(snapshot, dict) else None)
+        if problem is not None:
+            raise CheckpointError(f"Cannot resume this checkpoint: {problem}.")
+
+
 @dataclass
 class Resume:
     """The checkpoint a run continues from, read, verified and checked against the run's
@@ -254,6 +270,7 @@ class Resume:
         saved = to_container(saved_train_config(state["config"]))
         check_compatible(saved, to_container(cfg), RESUME_LOCKED)
         check_total_frames(cfg, state["counters"]["frames"])
+        check_simulator(state)
         return cls(cfg, state, checkpoint_dir, saved)
 
     @property
@@ -275,7 +292,10 @@ class Resume:
         # The buffers first: a hook's state may read them (hooks/base.py).
         trainer.replay_buffer.loads(self.checkpoint_dir / REPLAY_DIR)
         trainer.updates.load(self.checkpoint_dir)
-        trainer.load_state_dict(self.state)
+        try:
+            trainer.load_state_dict(self.state)
+        except SnapshotMismatch as err:  # before any of the run's files is cut back
+            raise CheckpointError(f"Cannot resume {trainer.run_dir}: {err}.") from err
         reason = self._inexact_reason(trainer)
         if reason is not None:
             # The n-step windows held back from the last batch would run into the restarted

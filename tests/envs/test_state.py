@@ -64,3 +64,27 @@ def test_snapshot_of_another_size_is_refused():
     snapshot = env_snapshot(make_env("SafetyHopperVelocity-v1", num_envs=2, seed=0))
     with pytest.raises(ValueError, match="2 copies.*3"):
         restore_env(make_env("SafetyHopperVelocity-v1", num_envs=3, seed=0), snapshot)
+
+
+def test_a_snapshot_of_another_mujoco_release_is_refused_naming_both(monkeypatch):
+    from s3rl_torchrl.envs import state
+
+    snapshot = env_snapshot(make_env("SafetyHopperVelocity-v1", num_envs=1, seed=0))
+    assert snapshot["mujoco"] == state.MUJOCO_VERSION
+    snapshot["mujoco"] = "3.3.7"
+    with pytest.raises(state.SnapshotMismatch, match=(
+        rf"written by MuJoCo 3.3.7 and this is MuJoCo {state.MUJOCO_VERSION}.*mujoco==3.3.7"
+    )):
+        restore_env(make_env("SafetyHopperVelocity-v1", num_envs=1, seed=0), snapshot)
+
+
+def test_simulator_bytes_mujoco_cannot_read_are_a_clear_error():
+    # A snapshot written before releases were recorded, by a release whose MjData this one
+    # cannot read (MuJoCo's own refusal is "Invalid serialized mjModel"): here, cut bytes.
+    from s3rl_torchrl.envs import state
+
+    snapshot = env_snapshot(make_env("SafetyHopperVelocity-v1", num_envs=1, seed=0))
+    del snapshot["mujoco"]
+    snapshot["copies"][0]["data"] = snapshot["copies"][0]["data"][:64].clone()
+    with pytest.raises(state.SnapshotMismatch, match="cannot read the snapshot's simulator state"):
+        restore_env(make_env("SafetyHopperVelocity-v1", num_envs=1, seed=0), snapshot)

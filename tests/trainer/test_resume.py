@@ -440,6 +440,30 @@ def test_resume_read_refuses_a_changed_locked_key_before_writing(tiny_config, tm
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
 
 
+def test_a_checkpoint_of_another_mujoco_release_is_refused_before_writing(tiny_config, tmp_path,
+                                                                         monkeypatch):
+    # The checkpoint's env snapshots were written by this process's MuJoCo; a process with
+    # another release is refused before anything is built or any file of the run changes.
+    from s3rl_torchrl.envs import state
+    from s3rl_torchrl.trainer.checkpoint import CheckpointError
+    from s3rl_torchrl.trainer.resume import Resume
+
+    cfg = tiny_config("algo=sac", "collector.total_frames=200")
+    train(cfg, tmp_path)
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    written = state.MUJOCO_VERSION
+    monkeypatch.setattr(state, "MUJOCO_VERSION", "9.9.9")
+    cfg.resume = str(tmp_path)
+    with pytest.raises(CheckpointError) as refused:
+        Resume.read(cfg)
+    assert str(refused.value) == (
+        f"Cannot resume this checkpoint: its simulator state was written by MuJoCo {written} "
+        f"and this is MuJoCo 9.9.9, which cannot read it: resume with mujoco=={written} (the "
+        "project pins its release in constraints.txt), or start the run again."
+    )
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+
+
 def test_a_restored_trainer_holds_its_checkpoints_state(tiny_config, tmp_path, monkeypatch,
                                                         capsys):
     # Stopped between two gradient steps of the second epoch (owed steps, the epoch's episodes
