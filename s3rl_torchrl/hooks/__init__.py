@@ -10,11 +10,14 @@ module whose state the checkpoint keeps.
 - ``critics.CriticDiagnostics``: the SAC family's critics against recent returns and the actor's
   gradient per loss term (``critic/*``, ``grad/*``);
 - ``video.EvalVideo``: a video of one evaluation episode, unsafe steps marked, through the
-  run's logger every ``eval.video_interval`` epochs.
+  run's logger every ``eval.video_interval`` epochs;
+- ``policy_average.PolicyAverage``: moving averages of the actor's weights, evaluated beside it
+  at every epoch's end and after training (``eval.ema_horizons``).
 """
 
 from s3rl_torchrl.hooks.base import HOOK_POINTS, HookHost, TrainerHook  # noqa: F401
 from s3rl_torchrl.hooks.critics import CriticDiagnostics  # noqa: F401
 from s3rl_torchrl.hooks.labels import GradedLabels, probed_label  # noqa: F401
+from s3rl_torchrl.hooks.policy_average import PolicyAverage  # noqa: F401
 from s3rl_torchrl.hooks.probes import LinearProbes  # noqa: F401
 from s3rl_torchrl.hooks.video import EvalVideo  # noqa: F401

@@ -13,7 +13,10 @@ in the order a run meets them, and what their ops take and return:
   ``grad_steps``, the training and evaluation statistics and the last losses);
 - ``"epoch_end"``: ``op(trainer, row) -> None``, after the row is logged and the checkpoint
   written; the one point whose ops get the trainer (a callback may stop the run,
-  ``trainer.stop.requested = True``).
+  ``trainer.stop.requested = True``);
+- ``"final_evaluation"``: ``op(episodes, max_steps) -> dict[str, EvalResult]``, once after
+  training, after the run's own final evaluations: each result is a row of the final table and
+  an entry of ``final_eval.json`` under its name.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from typing import Any, Protocol
 
 from torchrl.data import TensorDictReplayBuffer
 
-HOOK_POINTS = ("after_collect", "after_update", "after_evaluation", "epoch_end")
+HOOK_POINTS = (
+    "after_collect", "after_update", "after_evaluation", "epoch_end", "final_evaluation"
+)
 
 
 class HookHost(Protocol):

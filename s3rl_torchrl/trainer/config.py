@@ -190,6 +190,15 @@ class EvalConfig:
     delivery_epochs: int = 0
     delivery_episodes: int = 5
     delivery_cost_share: float = 1.0
+    # Also evaluate every kept policy on final_episodes other episodes (the candidates'
+    # report_reward / report_cost in final_eval.json), so that another picking rule's pick can be
+    # read off the same run, reported on episodes it was not picked on. After the pick's own
+    # evaluation: the run's other numbers are unchanged.
+    delivery_report_all: bool = False
+    # Exponential moving averages of the actor's weights over about h gradient steps each
+    # (decay 1 - 1/h; hooks/policy_average.py), evaluated at every epoch's end (ema<h>/* columns)
+    # and on the final episodes (final_eval.json's ema<h>), on test envs of their own. []: none.
+    ema_horizons: list[int] = field(default_factory=list)
     # Every this many epochs, a video of one deterministic episode (eval.max_steps steps, unsafe
     # steps marked) through the logger's log_video (hooks/video.py, docs/video.md); 0: none.
     video_interval: int = 0
@@ -206,6 +215,11 @@ class EvalConfig:
         if self.max_steps is not None:
             check_range(f"{path}.max_steps", self.max_steps, 1)
         check_range(f"{path}.video_interval", self.video_interval, 0)
+        horizons = list(self.ema_horizons)
+        for horizon in horizons:
+            check_range(f"{path}.ema_horizons", horizon, 1)
+        if len(set(horizons)) != len(horizons):
+            fail(f"{path}.ema_horizons", horizons, "must not repeat a horizon")
 
 
 @dataclass
@@ -357,6 +371,12 @@ class TrainConfig:
                 prefix + "eval.video_interval",
                 self.eval.video_interval,
                 "is for single-seed runs; record a seed's video with s3rl-eval video=true",
+            )
+        if self.eval.ema_horizons and self.seeds is not None:
+            fail(
+                prefix + "eval.ema_horizons",
+                list(self.eval.ema_horizons),
+                "is for single-seed runs (seed=N, not seeds=[...])",
             )
 
     def _check_contrastive_label(self, prefix: str) -> None:

@@ -37,7 +37,7 @@ import random
 import signal
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,7 @@ from s3rl_torchrl.hooks import (
     EvalVideo,
     GradedLabels,
     LinearProbes,
+    PolicyAverage,
     TrainerHook,
 )
 from s3rl_torchrl.trainer.builders import (
@@ -305,6 +306,8 @@ class Trainer:
             ).register(self, "critic_diagnostics")
         if cfg.eval.video_interval:
             EvalVideo.for_run(cfg).register(self, "video")
+        if cfg.eval.ema_horizons:
+            PolicyAverage.for_run(cfg, self.agent.actor, evaluate).register(self, "policy_average")
         for name, hook in (hooks or {}).items():
             hook.register(self, name)
         if on_epoch_end is not None:
@@ -553,9 +556,9 @@ class Trainer:
         if self.cfg.resume is None or self._collector is not None or not path.is_file():
             return None
         saved = json.loads(path.read_text())
-        saved.pop("best_feasible", None)
-        saved.pop("delivered", None)
-        result = EvalResult(**saved)
+        # The last policy's statistics, without the other policies' (best_feasible, delivered,
+        # a hook's) entries beside them.
+        result = EvalResult(**{f.name: saved[f.name] for f in fields(EvalResult) if f.name in saved})
         label = f"{self.cfg.algo.name} {self.cfg.task.name} seed {self.cfg.seed}"
         table = format_table(
             {label: result},
@@ -598,6 +601,10 @@ class Trainer:
                 f"checkpoints/{DELIVERED_CHECKPOINT})"
             ] = delivered
             saved["delivered"] = {**delivered.to_dict(), **record}
+        for op in self._ops["final_evaluation"]:  # hooks: the policy averages
+            for name, extra in op(episodes, max_steps).items():
+                rows[name] = extra
+                saved[name] = extra.to_dict()
         Path(self.run_dir / FINAL_EVAL_FILE).write_text(json.dumps(saved, indent=2) + "\n")
         if cfg.eval.random_baseline:
             rows["random policy (reference)"] = evaluate(
@@ -625,6 +632,12 @@ class Trainer:
             results.append(evaluate(self.test_env, policy, cfg.eval.delivery_episodes, max_steps))
         index, feasible = pick_delivered(results, limit)
         delivered = evaluate(self.test_env, policies[index], episodes, max_steps)
+        # eval.delivery_report_all: every candidate on other episodes too, after the pick's own.
+        reports = (
+            [evaluate(self.test_env, policy, episodes, max_steps) for policy in policies]
+            if cfg.eval.delivery_report_all
+            else None
+        )
         record = {
             "epoch": candidates[index]["epoch"],
             "frames": candidates[index]["frames"],
@@ -636,6 +649,8 @@ class Trainer:
                 for c, r in zip(candidates, results, strict=True)
             ],
         }
+        for entry, report in zip(record["candidates"], reports or [], strict=False):
+            entry["report_reward"], entry["report_cost"] = report.reward_mean, report.cost_mean
         return delivered, record, policies[index]
 
     def _interrupted(self, progress) -> TrainResult:

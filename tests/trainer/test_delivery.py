@@ -73,6 +73,21 @@ def test_a_run_delivers_its_pick_and_keeps_the_last_policy_untouched(tiny_config
     assert delivered["episodes"] == 3  # reported on the final episodes, not the picking ones
 
 
+def test_report_all_reports_every_candidate_after_the_run_s_own_numbers(tiny_config, tmp_path):
+    # eval.delivery_report_all: each candidate also on final_episodes other episodes, evaluated
+    # after everything the run reports without it, which stays as it was.
+    overrides = ("algo=sac_lag", "collector.total_frames=600", "eval.final_episodes=3",
+                 "eval.delivery_epochs=2", "eval.delivery_episodes=2")
+    train(tiny_config(*overrides), tmp_path / "picked")
+    train(tiny_config(*overrides, "eval.delivery_report_all=true"), tmp_path / "all")
+    first = json.loads((tmp_path / "picked" / "final_eval.json").read_text())
+    saved = json.loads((tmp_path / "all" / "final_eval.json").read_text())
+    reports = [(c.pop("report_reward"), c.pop("report_cost")) for c in saved["delivered"]["candidates"]]
+    assert saved == first
+    assert len(reports) == 2 and all(cost >= 0 for _, cost in reports)
+    assert all("report_cost" not in c for c in first["delivered"]["candidates"])
+
+
 def test_resume_keeps_the_candidates(tiny_config, tmp_path):
     overrides = ("algo=sac_lag", "collector.total_frames=600", "eval.delivery_epochs=3")
 

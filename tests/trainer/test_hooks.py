@@ -101,7 +101,9 @@ def test_unknown_points_and_names_are_refused(tiny_config, tmp_path):
     recorder.register(trainer, "recorder")
     with pytest.raises(ValueError, match="'recorder' is registered already"):
         trainer.register_module("recorder", recorder)
-    assert set(HOOK_POINTS) == {"after_collect", "after_update", "after_evaluation", "epoch_end"}
+    assert set(HOOK_POINTS) == {
+        "after_collect", "after_update", "after_evaluation", "epoch_end", "final_evaluation"
+    }
 
 
 def test_on_epoch_end_is_an_epoch_end_op(tiny_config, tmp_path):

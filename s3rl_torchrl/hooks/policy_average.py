@@ -1,0 +1,157 @@
+"""Exponential moving averages of the actor's weights, evaluated beside the policy itself
+(``eval.ema_horizons``, off by default; docs/recipes.md, "The delivered policy").
+
+The multiplier swings, and the deterministic policy of any one epoch swings with it: on several
+tasks its cost goes from 0 to far over the limit within a few epochs while the mean over those
+epochs sits below it (research/2026-12-04-delivery-rules.md). An average of the actor's weights
+over the last ``h`` gradient steps (decay ``1 - 1/h`` per step, torch's
+:class:`~torch.optim.swa_utils.AveragedModel`) may sit nearer that mean than the last weights
+do. Each average is evaluated deterministically at every epoch's end (``ema<h>/reward``,
+``ema<h>/cost``, ``ema<h>/length`` in the epoch's row) and after training on the final episodes
+(``final_eval.json``'s ``ema<h>``).
+
+The averages are evaluated on test envs of their own (the run's test seed + ``SEED_OFFSET``),
+so the run's own evaluations, and everything trained, are the same with and without them. The
+averages and those envs' state are the hook's state, in the checkpoint.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+from torchrl.envs import EnvBase
+
+from s3rl_torchrl.envs import make_env
+from s3rl_torchrl.envs.state import env_snapshot, restore_env
+from s3rl_torchrl.hooks.base import HookHost, TrainerHook
+
+__all__ = ["PolicyAverage", "ema_name"]
+
+#: Added to the run's test seed for the averages' test envs: apart from the run's own test envs
+#: (seed + 100_000) and from the training envs (seed).
+SEED_OFFSET = 200_000
+
+
+def ema_name(horizon: int) -> str:
+    """The name of the average over about ``horizon`` gradient steps: its columns' prefix and
+    its key in ``final_eval.json``."""
+    return f"ema{horizon}"
+
+
+class PolicyAverage(TrainerHook):
+    """One exponential moving average of ``actor``'s weights per horizon ``h`` in ``horizons``
+    (decay ``1 - 1/h`` per gradient step), each evaluated on ``episodes`` deterministic episodes
+    of ``task`` at every epoch's end.
+
+    ``evaluate(env, policy, episodes, max_steps) -> EvalResult`` is the trainer's evaluation;
+    the test envs are built on first use (``make_env``: ``num_envs`` copies seeded with
+    ``seed``, ``env_kwargs``).
+    """
+
+    def __init__(
+        self,
+        actor: torch.nn.Module,
+        horizons: list[int],
+        task: str,
+        seed: int,
+        num_envs: int,
+        episodes: int,
+        max_steps: int | None,
+        evaluate,
+        **env_kwargs: Any,
+    ) -> None:
+        if not horizons or any(h < 1 for h in horizons) or len(set(horizons)) != len(horizons):
+            raise ValueError(f"horizons must be distinct integers >= 1, got {horizons!r}.")
+        self.actor, self.horizons = actor, list(horizons)
+        self.averages = {
+            h: AveragedModel(actor, multi_avg_fn=get_ema_multi_avg_fn(1.0 - 1.0 / h))
+            for h in self.horizons
+        }
+        self.task, self.seed, self.num_envs = task, seed, num_envs
+        self.episodes, self.max_steps, self._evaluate = episodes, max_steps, evaluate
+        self.env_kwargs = env_kwargs  # make_env's device, batching
+        self._env: EnvBase | None = None
+        self._env_state: dict[str, Any] | None = None  # a resumed run's, until the env is built
+
+    @classmethod
+    def for_run(cls, cfg, actor: torch.nn.Module, evaluate) -> PolicyAverage:
+        """The run ``cfg``'s hook on ``actor``: ``eval.ema_horizons``, its task, seed and
+        evaluation settings."""
+        from s3rl_torchrl.trainer.evaluate_checkpoint import TEST_SEED_OFFSET
+
+        return cls(
+            actor,
+            list(cfg.eval.ema_horizons),
+            cfg.task.name,
+            cfg.seed + TEST_SEED_OFFSET + SEED_OFFSET,
+            cfg.eval.num_envs,
+            cfg.eval.episodes,
+            cfg.eval.max_steps,
+            evaluate,
+            device=cfg.device,
+            batching=cfg.collector.batching,
+        )
+
+    def register(self, host: HookHost, name: str) -> None:
+        host.register_op("after_update", self.update)
+        host.register_op("after_evaluation", self.measure)
+        host.register_op("final_evaluation", self.final)
+        host.register_module(name, self)
+
+    def policy(self, horizon: int) -> torch.nn.Module:
+        """The average over ``horizon`` steps, as a module like the actor."""
+        return self.averages[horizon].module
+
+    def update(self, losses) -> None:
+        for average in self.averages.values():
+            average.update_parameters(self.actor)
+
+    @property
+    def env(self) -> EnvBase:
+        if self._env is None:
+            self._env = make_env(
+                self.task, num_envs=self.num_envs, seed=self.seed, **self.env_kwargs
+            )
+            if self._env_state is not None:
+                restore_env(self._env, self._env_state)
+                self._env_state = None
+        return self._env
+
+    def _results(self, episodes: int, max_steps: int | None) -> dict[str, Any]:
+        return {
+            ema_name(h): self._evaluate(self.env, self.policy(h), episodes, max_steps)
+            for h in self.horizons
+        }
+
+    def measure(self, row: dict[str, Any]) -> dict[str, float]:
+        """``after_evaluation`` op: each average's evaluation, as columns of the epoch's row."""
+        out = {}
+        for name, result in self._results(self.episodes, self.max_steps).items():
+            out[f"{name}/reward"] = result.reward_mean
+            out[f"{name}/cost"] = result.cost_mean
+            out[f"{name}/length"] = result.length_mean
+        return out
+
+    def final(self, episodes: int, max_steps: int | None) -> dict[str, Any]:
+        """``final_evaluation`` op: each average on the final episodes, by name."""
+        return self._results(episodes, max_steps)
+
+    def state_dict(self) -> dict[str, Any]:
+        env_state = env_snapshot(self._env) if self._env is not None else self._env_state
+        return {
+            "averages": {h: average.state_dict() for h, average in self.averages.items()},
+            "env": env_state,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if not state:
+            return
+        for h, average in self.averages.items():
+            average.load_state_dict(state["averages"][h])
+        if state.get("env") is not None:
+            if self._env is not None:
+                restore_env(self._env, state["env"])
+            else:
+                self._env_state = state["env"]
