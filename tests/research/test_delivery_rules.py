@@ -4,22 +4,10 @@ follows the note's rule on hand-made tallies."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
 from tests.conftest import compose_train
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _script(name: str):
-    path = ROOT / "research" / "delivered_policy" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from tests.research.test_delivered_selection import _script
 
 
 @pytest.fixture(scope="module")
