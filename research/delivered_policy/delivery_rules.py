@@ -26,10 +26,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from s3rl_torchrl.report.runs import find_runs
+from s3rl_torchrl.trainer.evaluation import pick_delivered
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
 from selection import run_queue  # noqa: E402
@@ -89,8 +91,9 @@ def protocols() -> list[str]:
     return ["last", *(f"pick{share:g}" for share in SHARES), *(f"ema{h}" for h in HORIZONS)]
 
 
-def delivered(final: dict, protocol: str) -> tuple[float, float] | None:
-    """(reward, cost) the rule ``protocol`` delivers, on episodes it was not chosen on."""
+def delivered(final: dict, protocol: str, cost_limit: float) -> tuple[float, float] | None:
+    """(reward, cost) the rule ``protocol`` delivers for a run of a task with ``cost_limit``,
+    on episodes it was not chosen on."""
     if protocol == "last":
         return final["reward_mean"], final["cost_mean"]
     if protocol.startswith("ema"):
@@ -102,13 +105,10 @@ def delivered(final: dict, protocol: str) -> tuple[float, float] | None:
         return None
     if share == 1.0:  # the preset's own pick, reported by the run itself
         return record["reward_mean"], record["cost_mean"]
-    limit = share * record["pick_cost_limit"]
     candidates = record["candidates"]
-    within = [i for i, c in enumerate(candidates) if c["cost"] <= limit]
-    if within:  # pick_delivered's rule: the most reward within, else the cheapest; later on ties
-        index = max(within, key=lambda i: (candidates[i]["reward"], i))
-    else:
-        index = min(range(len(candidates)), key=lambda i: (candidates[i]["cost"], -i))
+    # The run's own rule (trainer.evaluation.pick_delivered) on the candidates' picking numbers.
+    readings = [SimpleNamespace(reward_mean=c["reward"], cost_mean=c["cost"]) for c in candidates]
+    index, _ = pick_delivered(readings, share * cost_limit)
     chosen = candidates[index]
     return chosen["report_reward"], chosen["report_cost"]
 
@@ -127,7 +127,7 @@ def summarise(root: Path) -> str:
         limit = run.cost_limit
         cells = []
         for name in names:
-            value = delivered(run.final, name)
+            value = delivered(run.final, name, limit)
             if value is None:
                 cells.append("–")
                 continue

@@ -54,15 +54,15 @@ def test_each_rule_delivers_what_the_note_says(rules):
         candidate(40, 6.0, 41, 5.0),  # within 7 (and not 5)
         candidate(30, 6.5, 29, 2.0),  # within 7, less reward
     ])
-    assert rules.delivered(run, "last") == (50.0, 12.0)
-    assert rules.delivered(run, "pick1") == (61.0, 9.0)  # the run's own pick, as it reported it
-    assert rules.delivered(run, "pick0.7") == (41, 5.0)  # the most reward at cost <= 7
+    assert rules.delivered(run, "last", 10.0) == (50.0, 12.0)
+    assert rules.delivered(run, "pick1", 10.0) == (61.0, 9.0)  # the run's own pick, as it reported it
+    assert rules.delivered(run, "pick0.7", 10.0) == (41, 5.0)  # the most reward at cost <= 7
     # None at cost <= 5: the cheapest (the later on a tie), on its reporting episodes.
-    assert rules.delivered(run, "pick0.5") == (41, 5.0)
+    assert rules.delivered(run, "pick0.5", 10.0) == (41, 5.0)
     tie = final([candidate(10, 6.0, 1, 1.0), candidate(20, 6.0, 2, 2.0)])
-    assert rules.delivered(tie, "pick0.5") == (2, 2.0)
-    assert rules.delivered(run, "ema2000") == (55.0, 4.0)
-    assert rules.delivered(run, "ema10000") is None  # a run without that average
+    assert rules.delivered(tie, "pick0.5", 10.0) == (2, 2.0)
+    assert rules.delivered(run, "ema2000", 10.0) == (55.0, 4.0)
+    assert rules.delivered(run, "ema10000", 10.0) is None  # a run without that average
 
 
 def tally(within: int, ratio: float) -> dict:
