@@ -20,9 +20,10 @@ iteration per collected batch:
 4. at each epoch's end: evaluate deterministically, log, checkpoint every ``save_interval``.
 
 What a run measures or stores besides training comes from hooks (``s3rl_torchrl/hooks/``),
-which the config switches on and which the loop calls at four points: after each collect,
-after each gradient step, after each evaluation (columns of the epoch's row) and at each
-epoch's end (:meth:`Trainer.register_op`, as torchrl's trainer offers).
+which the config switches on and which the loop calls at five points: after each collect,
+after each gradient step, after each evaluation (columns of the epoch's row), at each epoch's
+end and after the final evaluation (entries of ``final_eval.json``;
+:meth:`Trainer.register_op`, as torchrl's trainer offers).
 
 Interrupts (Ctrl-C, SIGTERM) stop between two gradient steps; a checkpoint is written and the
 run can go on with ``resume=<run dir>``: pending gradient steps and the epoch's end are done
