@@ -151,7 +151,11 @@ def summarise(root: Path) -> str:
         t = tally[name]
         ratio = f"{np.median(t['ratios']):.2f}" if t["ratios"] else "–"
         lines.append(f"| {name} | {t['within']} of {t['runs']} | {ratio} |")
-    lines += ["", choice(tally)]
+    expected = len(SEEDS) * len(GROUPS)
+    if len(runs) < expected:  # the rule reads the whole round, never a part of it
+        lines += ["", f"The rule's choice: not yet ({len(runs)} of {expected} runs finished)."]
+    else:
+        lines += ["", choice(tally)]
     return "\n".join(lines) + "\n"
 
 
