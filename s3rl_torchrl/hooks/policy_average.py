@@ -4,9 +4,9 @@
 The multiplier swings, and the deterministic policy of any one epoch swings with it: on several
 tasks its cost goes from 0 to far over the limit within a few epochs while the mean over those
 epochs sits below it (research/2026-12-04-delivery-rules.md). An average of the actor's weights
-over the last ``h`` gradient steps (decay ``1 - 1/h`` per step, torch's
-:class:`~torch.optim.swa_utils.AveragedModel`) may sit nearer that mean than the last weights
-do. Each average is evaluated deterministically at every epoch's end (``ema<h>/reward``,
+over the last ``h`` gradient steps (decay ``1 - 1/h`` per step: torch's
+``get_ema_multi_avg_fn``, one ``torch._foreach_lerp_`` over the weights) may sit nearer that
+mean than the last weights do. Each average is evaluated deterministically at every epoch's end (``ema<h>/reward``,
 ``ema<h>/cost``, ``ema<h>/length`` in the epoch's row) and after training on the final episodes
 (``final_eval.json``'s ``ema<h>``).
 
@@ -17,10 +17,10 @@ averages and those envs' state are the hook's state, in the checkpoint.
 
 from __future__ import annotations
 
+from copy import deepcopy
 from typing import Any
 
 import torch
-from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torchrl.envs import EnvBase
 
 from s3rl_torchrl.envs import make_env
@@ -32,6 +32,52 @@ __all__ = ["PolicyAverage", "ema_name"]
 #: Added to the run's test seed for the averages' test envs: apart from the run's own test envs
 #: (seed + 100_000) and from the training envs (seed).
 SEED_OFFSET = 200_000
+
+
+class WeightAverage:
+    """An exponential moving average of ``module``'s weights with ``decay`` per update: the
+    first update copies them, each later one moves ``1 - decay`` of the way to them (buffers are
+    copied). ``torch.optim.swa_utils.AveragedModel`` computes the same average with the same
+    ``_foreach_lerp_`` (``tests/hooks/test_policy_average.py`` holds the two together), but
+    listing the actor's tensors and its bookkeeping at every update took 12x as long: two
+    averages of the preset's S3RL actor, 470 against 39 us a gradient step of ~4.7 ms
+    (``research/studies/weight_average_cost.py``)."""
+
+    def __init__(self, module: torch.nn.Module, decay: float) -> None:
+        self.module = deepcopy(module).requires_grad_(False)
+        self.weight = 1.0 - decay
+        self.updates = 0
+        self._averaged = list(self.module.parameters()) + list(self.module.buffers())
+        # The source's tensors, listed once per source module: walking a TensorDictModule's
+        # tree for them costs more than the average itself (the optimiser updates them in
+        # place, so the list stays valid).
+        self._source: tuple[torch.nn.Module, list[torch.Tensor], int] | None = None
+
+    def _tensors(self, source: torch.nn.Module) -> tuple[list[torch.Tensor], int]:
+        if self._source is None or self._source[0] is not source:
+            params = [p.detach() for p in source.parameters()]
+            self._source = (source, params + list(source.buffers()), len(params))
+        return self._source[1], self._source[2]
+
+    @torch.no_grad()
+    def update(self, source: torch.nn.Module) -> None:
+        current, n_params = self._tensors(source)
+        if len(current) != len(self._averaged):
+            raise ValueError("the source module's weights do not match the averaged module's")
+        if self.updates == 0:
+            torch._foreach_copy_(self._averaged, current)
+        else:
+            torch._foreach_lerp_(self._averaged[:n_params], current[:n_params], self.weight)
+            if len(current) > n_params:  # buffers are copied, not averaged
+                torch._foreach_copy_(self._averaged[n_params:], current[n_params:])
+        self.updates += 1
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"module": self.module.state_dict(), "updates": self.updates}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.module.load_state_dict(state["module"])
+        self.updates = int(state["updates"])
 
 
 def ema_name(horizon: int) -> str:
@@ -65,10 +111,7 @@ class PolicyAverage(TrainerHook):
         if not horizons or any(h < 1 for h in horizons) or len(set(horizons)) != len(horizons):
             raise ValueError(f"horizons must be distinct integers >= 1, got {horizons!r}.")
         self.actor, self.horizons = actor, list(horizons)
-        self.averages = {
-            h: AveragedModel(actor, multi_avg_fn=get_ema_multi_avg_fn(1.0 - 1.0 / h))
-            for h in self.horizons
-        }
+        self.averages = {h: WeightAverage(actor, 1.0 - 1.0 / h) for h in self.horizons}
         self.task, self.seed, self.num_envs = task, seed, num_envs
         self.episodes, self.max_steps, self._evaluate = episodes, max_steps, evaluate
         self.env_kwargs = env_kwargs  # make_env's device, batching
@@ -106,7 +149,7 @@ class PolicyAverage(TrainerHook):
 
     def update(self, losses) -> None:
         for average in self.averages.values():
-            average.update_parameters(self.actor)
+            average.update(self.actor)
 
     @property
     def env(self) -> EnvBase:

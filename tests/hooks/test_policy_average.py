@@ -36,6 +36,32 @@ def test_the_average_is_the_exponential_moving_average_by_hand():
     assert actor.weight.item() == 3.5  # the actor itself is left alone
 
 
+def test_the_average_is_torchs_averaged_model():
+    # The same exponential moving average as torch.optim.swa_utils.AveragedModel's, weight for
+    # weight, over a small network's changing weights.
+    from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+
+    from s3rl_torchrl.hooks.policy_average import WeightAverage
+
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(3, 4), torch.nn.Tanh(), torch.nn.Linear(4, 2))
+    ours = WeightAverage(net, 0.9)
+    reference = AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(0.9))
+    for _ in range(5):
+        with torch.no_grad():
+            for p in net.parameters():
+                p.add_(torch.randn_like(p))
+        ours.update(net)
+        reference.update_parameters(net)
+    for mine, theirs in zip(ours.module.parameters(), reference.module.parameters(), strict=True):
+        assert torch.allclose(mine, theirs, rtol=0, atol=1e-6)
+    restored = WeightAverage(net, 0.9)
+    restored.load_state_dict(ours.state_dict())
+    assert restored.updates == 5
+    assert all(torch.equal(a, b) for a, b in zip(restored.module.parameters(),
+                                                  ours.module.parameters(), strict=True))
+
+
 def test_horizons_are_checked():
     actor = torch.nn.Linear(1, 1)
     for horizons in ([], [0], [5, 5]):
