@@ -76,6 +76,11 @@ class WeightAverage:
         return {"module": self.module.state_dict(), "updates": self.updates}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        if "n_averaged" in state:  # an AveragedModel's, as the hook kept it before WeightAverage
+            weights = {k.removeprefix("module."): v for k, v in state.items() if k != "n_averaged"}
+            self.module.load_state_dict(weights)
+            self.updates = int(state["n_averaged"])
+            return
         self.module.load_state_dict(state["module"])
         self.updates = int(state["updates"])
 
