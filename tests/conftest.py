@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 
 import pytest
@@ -19,15 +20,23 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
 
 # Small fixtures that shrink experiments to seconds (BenchMARL style), for every area's tests.
+@functools.cache
+def _register_configs_once() -> None:
+    # Storing the schemas takes ~0.4 s and the suite composes hundreds of configs; a test that
+    # changes a registry calls register_configs() itself, before and after (test_tasks.py).
+    from s3rl_torchrl.trainer import register_configs
+
+    register_configs()
+
+
 def compose_train(*overrides: str, return_hydra_config: bool = False):
     """The Hydra config ``s3rl-train`` would get with these overrides (not validated); with
     ``return_hydra_config``, its ``hydra`` node too (the sweep's directories)."""
     from hydra import compose, initialize_config_dir
 
     from s3rl_torchrl.recipes import config_dir
-    from s3rl_torchrl.trainer import register_configs
 
-    register_configs()
+    _register_configs_once()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
         return compose(
             config_name="train", overrides=list(overrides), return_hydra_config=return_hydra_config
