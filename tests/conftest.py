@@ -19,7 +19,6 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     torch.set_num_threads(1)
 
 
-# Small fixtures that shrink experiments to seconds (BenchMARL style), for every area's tests.
 @functools.cache
 def _register_configs_once() -> None:
     # Storing the schemas takes ~0.4 s and the suite composes hundreds of configs; a test that
@@ -29,6 +28,7 @@ def _register_configs_once() -> None:
     register_configs()
 
 
+# Small fixtures that shrink experiments to seconds (BenchMARL style), for every area's tests.
 def compose_train(*overrides: str, return_hydra_config: bool = False):
     """The Hydra config ``s3rl-train`` would get with these overrides (not validated); with
     ``return_hydra_config``, its ``hydra`` node too (the sweep's directories)."""
