@@ -313,6 +313,27 @@ def test_update_table1_paired_cell_by_hand(update_table1):
     assert update_table1.paired(s3rl, sac_lag, "last") == "+2.00 (p = 0.07) | +0.00 (p undefined)"
 
 
+def test_the_delivery_rules_round_is_its_research_table():
+    # The sentence quotes the tally `research/delivered_policy/delivery_rules.py summarise` writes
+    # (tests/research/test_delivery_rules.py holds that table to the exported runs).
+    note = (ROOT / "research" / "delivered_policy" / "delivery_rules.md").read_text()
+    tally = {rule: (int(within.split(" of ")[0]), int(within.split(" of ")[1]), float(ratio))
+             for rule, within, ratio in table_rows(note, "| rule | within the limit |")}
+    assert {runs for _, runs, _ in tally.values()} == {30}
+    assert note.rstrip().endswith("The rule's choice: pick1 (30 of 30 within the limit, reward ratio 1.00).")
+    prose = " ".join(TEXT.split())
+    quoted = (
+        f"runs within the limit of 30: the pick {tally['pick1'][0]}, the actor's weights averaged "
+        f"over ~10000 or ~2000 gradient steps {tally['ema10000'][0]} and {tally['ema2000'][0]}, "
+        f"the pick under 0.7 or 0.5 of the limit {tally['pick0.7'][0]}, "
+        f"the last policy {tally['last'][0]}"
+    )
+    assert quoted in prose
+    assert tally["pick0.7"][0] == tally["pick0.5"][0]
+    ratios = [ratio for _, _, ratio in tally.values()]
+    assert f"(median reward kept {min(ratios):.2f}-{max(ratios):.2f}). The pick stays." in prose
+
+
 SELECTION_HEADER = "| candidate | last policy: within the limit | reward kept |"
 SELECTION_RUNS = ROOT / "research" / "results" / "delivered_selection"
 
