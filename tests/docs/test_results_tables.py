@@ -331,7 +331,8 @@ def test_the_delivery_rules_round_is_its_research_table():
     assert quoted in prose
     assert tally["pick0.7"][0] == tally["pick0.5"][0]
     ratios = [ratio for _, _, ratio in tally.values()]
-    assert f"(median reward kept {min(ratios):.2f}-{max(ratios):.2f}). The pick stays." in prose
+    # As percentages: the prose's decimals are all cells of its own tables.
+    assert f"(median reward kept {min(ratios) * 100:.0f}-{max(ratios) * 100:.0f}%). The pick stays." in prose
 
 
 SELECTION_HEADER = "| candidate | last policy: within the limit | reward kept |"
