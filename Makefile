@@ -87,7 +87,7 @@ ifneq ($(wildcard results/table1_v2),)
 			--json docs/table1_v2/before_after_$$protocol.json || exit 1; \
 	done
 endif
-	for protocol in last delivered; do \
+	for protocol in last best_feasible delivered; do \
 		$(BIN)/s3rl-report gap $(GAP_SETTINGS) --protocol $$protocol \
 			--out docs/reproduction/gap_$$protocol.md \
 			--json docs/reproduction/gap_$$protocol.json || exit 1; \

@@ -44,6 +44,7 @@ from s3rl_torchrl.report.aggregate import (
 from s3rl_torchrl.report.before_after import MISS_CAUSES, TARGET_KINDS
 from s3rl_torchrl.report.paper import paper_results_for
 from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
+from s3rl_torchrl.report.stats import paired_seed_test
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "results.md"
@@ -68,11 +69,13 @@ PHASE_OFFSET_HEADER = "| frames | gradient steps since the last phase |"
 PHASE_PROBE_HEADER = "| task | algo | seed | at 1M: reward / cost |"
 # experiment=paper's runs (results/reproduction): each (task, algo) with every seed finished.
 REPRODUCTION = RESULTS / "reproduction"
-REPRODUCTION_HEADER = "| task | algo | reward (ours) | reward (paper) |"
+REPRODUCTION_HEADER = "| task | S3RL: reward / cost | SAC-Lag: reward / cost |"
 # S3RL against SAC-Lag per preset on the reproduction's tasks: `s3rl-report gap`'s answers
 # (docs/reproduction/gap_<protocol>.json, written by make report before this script runs).
-GAP_PAGES = {"last": ROOT / "docs" / "reproduction" / "gap_last.json",
-             "delivered": ROOT / "docs" / "reproduction" / "gap_delivered.json"}
+# A setting's *delivered* answer is its last policy's where its runs pick nothing, so it is shown
+# only for a setting whose runs made a pick.
+GAP_PAGES = {policy: ROOT / "docs" / "reproduction" / f"gap_{policy.replace('-', '_')}.json"
+             for policy in ("last", "best-feasible", "delivered")}
 GAP_HEADER = "| setting | policy | tasks | P(S3RL's cost lower) | P(S3RL's reward higher) |"
 # Issue 60's evidence against its targets: `s3rl-report before-after`'s targets for the last
 # policy and the delivered pick (docs/table1_v2/before_after_<protocol>.json, written by make
@@ -144,42 +147,46 @@ def paired(s3rl: dict[int, dict], sac_lag: dict[int, dict], policy: str) -> str:
 
 
 def reproduction_rows(tasks: list[str]) -> list[str]:
-    """The paper-settings runs beside the paper's Table 1, in `tasks`' order: mean ± std over
-    the pooled final episodes (population std, as the paper and final_eval.json report them)
-    of each task and algo whose seeds have all finished."""
+    """The paper-settings runs beside the paper's Table 1, in `tasks`' order, one row per task
+    whose seeds have all finished for both algos: each algo's last policy (mean over seeds of
+    its final evaluation), the paper's rows, and S3RL's cost minus SAC-Lag's, paired by seed."""
     finals: dict[tuple[str, str], dict[int, dict]] = {}
     for run in find_runs(REPRODUCTION):
         if run.finished:
             finals.setdefault((run.task, run.algo), {})[run.seed] = run.final
     rows = []
     for task in tasks:
-        for name, algo in ALGOS.items():
-            found = finals.get((task, algo), {})
-            if sorted(found) != list(SEEDS):
-                continue
-            paper = {
-                v.metric: f"{v.mean:.2f} ± {v.std:.2f}"
-                for v in paper_results_for(task)
-                if v.table == "Table 1" and v.algo == algo
-            }
-            cells = []
-            for key, metric in (("episode_rewards", "reward"), ("episode_costs", "cost")):
-                pooled = [value for final in found.values() for value in final[key]]
-                mean, std = statistics.fmean(pooled), statistics.pstdev(pooled)
-                cells += [f"{mean:.2f} ± {std:.2f}", paper[metric]]
-            rows.append(f"| {task} | {name} | " + " | ".join(cells) + " |")
+        found = {algo: finals.get((task, algo), {}) for algo in ALGOS.values()}
+        if any(sorted(runs) != list(SEEDS) for runs in found.values()):
+            continue
+        costs = {algo: {seed: final["cost_mean"] for seed, final in runs.items()}
+                 for algo, runs in found.items()}
+        test = paired_seed_test(costs["s3rl"], costs["sac_lag"])
+        difference = (f"{test.difference:+.2f} [{test.ci_low:+.2f}, {test.ci_high:+.2f}], "
+                      f"p {test.pvalue:.2f}")
+        cells = [ours(found[algo], "last") for algo in ALGOS.values()]
+        cells += [paper(task, algo) for algo in ALGOS.values()]
+        rows.append(f"| {task} | " + " | ".join(cells) + f" | {difference} |")
     return rows
 
 
 def gap_rows() -> list[str]:
-    """Per protocol and setting, the gap page's answer: rliable's probabilities over the tasks
+    """Per setting and protocol, the gap page's answer: rliable's probabilities over the tasks
     that setting has both algos of (their number), with their bootstrap intervals."""
+    pages = {policy: json.loads(path.read_text()) for policy, path in GAP_PAGES.items()}
     rows = []
-    for policy, path in GAP_PAGES.items():
-        for read in json.loads(path.read_text())["answers"]:
-            cells = [Estimate(**read[key]).cell() for key in ("lower_cost", "higher_reward")]
-            rows.append(f"| {read['setting']} | {policy} | {len(read['tasks'])} | "
-                        + " | ".join(cells) + " |")
+    for setting, trees in pages["last"]["settings"].items():
+        picks = any(run.config.get("eval", {}).get("delivery_epochs")
+                    for tree in trees for run in find_runs(ROOT / tree))
+        for policy, page in pages.items():
+            if policy == "delivered" and not picks:
+                continue
+            for read in page["answers"]:
+                if read["setting"] != setting:
+                    continue
+                cells = [Estimate(**read[key]).cell() for key in ("lower_cost", "higher_reward")]
+                rows.append(f"| {setting} | {policy} | {len(read['tasks'])} | "
+                            + " | ".join(cells) + " |")
     return rows
 
 

@@ -5,7 +5,8 @@ each named setting's result trees and, on the tasks of the first setting (the on
 about), puts the reference algo's final evaluation beside the baseline's under every setting:
 the mean cost and reward of each, their difference (reference - baseline) with a paired t-test
 over the seeds both ran, and the paper's Table 1 difference beside. Then one answer per setting
-over the tasks it has both algos of (the same tasks once every setting is complete): rliable's
+over the first setting's tasks it has both algos of (the same tasks once every setting is
+complete; a task the first setting has one algo of is in none): rliable's
 probability that a run of the reference has the lower cost (and the higher reward) than a run of
 the baseline, with its stratified-bootstrap interval
 (:func:`s3rl_torchrl.report.aggregate.probability_of_improvement`).
@@ -153,11 +154,15 @@ def gap(
                for algo in (reference, baseline)
                if not rows.get((task, name)) or not rows[task, name].seeds.get(algo)]
     shared = [t for t in tasks if all((t, n) in rows and rows[t, n].complete for n in read)]
+    # The first setting's question is asked on the tasks it has both algos of; another setting
+    # answers on those of them it has both algos of too, never on a task the question has not
+    # reached (one whose first setting has runs of a single algo so far).
+    asked = [t for t in tasks if (t, first) in rows and rows[t, first].complete]
     answers = []
     for name in read:
-        # Each setting over the tasks it has both algos of: the same tasks for every setting
-        # once all are in (``shared``); the page says which tasks each answer is over.
-        own = [t for t in tasks if (t, name) in rows and rows[t, name].complete]
+        # The same tasks for every setting once all are in (``shared``); the page says which
+        # tasks each answer is over.
+        own = [t for t in asked if (t, name) in rows and rows[t, name].complete]
         if not own:
             continue
         by_metric = {}
@@ -222,7 +227,8 @@ def write_markdown(result: Gap, path: str | Path, command: str = "") -> Path:
     lines += ["", "## Over the tasks", ""]
     if result.answers:
         lines += [
-            f"Per setting, over the tasks it has finished runs of both algos of: the probability "
+            f"Per setting, over the tasks it and the first setting have finished runs of both "
+            f"algos of: the probability "
             f"that a run of {ref} has the lower cost (the higher reward) than a run of {base} of "
             "the same task, averaged over the tasks (rliable), with its 95% stratified-bootstrap "
             "interval; 0.5: no difference. Settings are comparable where their tasks are the "

@@ -137,3 +137,17 @@ def test_cli_writes_the_page_and_the_json(presets, tmp_path, capsys):
     assert "each --setting needs its own name" in capsys.readouterr().err
     assert main(["gap", "--setting", f"x={tmp_path / 'nowhere'}", "--out", str(out)]) == 2
     assert "s3rl-report gap: error:" in capsys.readouterr().err
+
+
+def test_no_setting_answers_on_a_task_the_first_has_one_algo_of(presets, make_run):
+    # The first setting (paper) gains a task with only s3rl's runs; safe has both algos of it.
+    # Its per-task rows show it, but no answer is over it: the settings stay comparable.
+    hopper = "SafetyHopperVelocity-v1"
+    make_run(presets["paper"][0] / f"s3rl_{hopper}/seed10", hopper, "s3rl", 10, episodes(9, 1))
+    for algo, cost in (("s3rl", 2), ("sac_lag", 9)):
+        make_run(presets["safe"][0] / f"{algo}_{hopper}/seed10", hopper, algo, 10,
+                 episodes(9, cost))
+    result = gap(presets, reps=50)
+    assert hopper in result.tasks and result.rows[hopper, "safe"].complete
+    answers = {a.setting: a for a in result.answers}
+    assert answers["paper"].tasks == [CHEETAH, CIRCLE] and answers["safe"].tasks == [CIRCLE]
