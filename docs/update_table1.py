@@ -172,7 +172,8 @@ def reproduction_rows(tasks: list[str]) -> list[str]:
 
 def gap_rows() -> list[str]:
     """Per setting and protocol, the gap page's answer: rliable's probabilities over the tasks
-    that setting has both algos of (their number), with their bootstrap intervals."""
+    both it and the first setting (the paper's) have both algos of (their number), with their
+    bootstrap intervals."""
     pages = {policy: json.loads(path.read_text()) for policy, path in GAP_PAGES.items()}
     rows = []
     for setting, trees in pages["last"]["settings"].items():

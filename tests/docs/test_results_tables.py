@@ -440,6 +440,32 @@ def test_the_gap_rows_are_the_gap_pages_answers_counted_from_the_runs():
             assert close(point, statistics.mean(shares))
 
 
+def test_the_paper_settings_answer_says_what_its_tables_show():
+    # The answer's sentences, each against the rows it reads: rewritten when a task joins.
+    text = " ".join(prose())
+    answer = text[text.index("**The answer: S3RL is not shown to be safer under the paper's"):]
+    gaps = {(setting, policy): numbers(cost)
+            for setting, policy, _, cost, _ in table_rows(TEXT, GAP_HEADER)}
+    point, low, high = map(float, gaps["paper settings", "last"])
+    assert "an interval that holds 0.5" in answer and low <= 0.5 <= high
+    pvalues = [float(numbers(row[-1])[-1]) for row in REPRODUCTION]
+    assert "no task's difference is below p 0.05" in answer and min(pvalues) >= 0.05
+    drone = next(row for row in REPRODUCTION if row[0] == "SafetyDroneRun-v0")
+    paper_gap = float(numbers(drone[3])[1]) - float(numbers(drone[4])[1])
+    assert "DroneRun reverses the paper's sign" in answer
+    assert (paper_gap < 0) != drone[-1].startswith("-")
+    assert "S3RL's not the cheaper" in answer
+    assert float(gaps["paper settings", "best-feasible"][0]) <= 0.5
+    # "Intervals overlapping 0.64's": every sound-critic interval of the last policy meets it.
+    assert "intervals overlapping" in answer
+    for (setting, policy), (_, other_low, other_high) in gaps.items():
+        if policy == "last" and setting != "paper settings":
+            assert float(other_low) <= high and low <= float(other_high), setting
+    missing = [task for task in ("SafetyPointCircle1-v0", "SafetyCarCircle1-v0")
+               if task not in {row[0] for row in REPRODUCTION}]
+    assert ("not in yet" in answer) == bool(missing)
+
+
 EVIDENCE_HEADER = "| algo | target | before: Table 1's runs | last policy | delivered pick |"
 EVIDENCE = RESULTS / "table1_v2"
 
