@@ -454,16 +454,20 @@ def test_the_paper_settings_answer_says_what_its_tables_show():
     paper_gap = float(numbers(drone[3])[1]) - float(numbers(drone[4])[1])
     assert "DroneRun reverses the paper's sign" in answer
     assert (paper_gap < 0) != drone[-1].startswith("-")
-    assert "S3RL's not the cheaper" in answer
-    assert float(gaps["paper settings", "best-feasible"][0]) <= 0.5
-    # "Intervals overlapping 0.64's": every sound-critic interval of the last policy meets it.
-    assert "intervals overlapping" in answer
+    _, bf_low, bf_high = map(float, gaps["paper settings", "best-feasible"])
+    assert "best-feasible checkpoints:" in answer and bf_low <= 0.5 <= bf_high
+    circle = next(row for row in REPRODUCTION if row[0] == "SafetyPointCircle1-v0")
+    assert "on PointCircle1 both end far over the limit" in answer
+    assert all(float(numbers(cell)[1]) > 2 * 10 for cell in circle[1:3])
+    # "overlapping": every sound-critic interval of the last policy meets the paper settings'.
+    assert "(the preset), overlapping: none told apart" in answer
     for (setting, policy), (_, other_low, other_high) in gaps.items():
         if policy == "last" and setting != "paper settings":
             assert float(other_low) <= high and low <= float(other_high), setting
     missing = [task for task in ("SafetyPointCircle1-v0", "SafetyCarCircle1-v0")
                if task not in {row[0] for row in REPRODUCTION}]
     assert ("not in yet" in answer) == bool(missing)
+    assert all(task.removeprefix("Safety").removesuffix("-v0") in answer for task in missing)
 
 
 EVIDENCE_HEADER = "| algo | target | before: Table 1's runs | last policy | delivered pick |"
