@@ -1,5 +1,8 @@
 """A JSON record of an analysis (``s3rl-report lagrangian``, ``s3rl-report compare-runs``): its
-result with the command that made it and the machine, as the benchmark scripts write theirs."""
+result with the command that made it and the machine, as the benchmark scripts write theirs.
+
+A record whose command and result are already in ``path`` is left as it is: rebuilding the
+committed reports on another machine changes no file whose numbers did not change."""
 
 from __future__ import annotations
 
@@ -17,6 +20,16 @@ def write_json(path: str | Path, report: dict, command: str) -> None:
     path = Path(path)
     machine = {"platform": platform.platform(), "torch": torch.__version__}
     record = {"command": command, "machine": machine, **report}
+    if path.exists():
+        try:
+            written = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            written = None
+        # Compared through JSON, so tuples and lists (and int keys) read back alike.
+        if isinstance(written, dict) and {k: v for k, v in written.items() if k != "machine"} == \
+                json.loads(json.dumps({k: v for k, v in record.items() if k != "machine"})):
+            print(f"unchanged {path}")
+            return
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=2) + "\n")
     print(f"wrote {path}")
