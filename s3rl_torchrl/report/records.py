@@ -20,16 +20,25 @@ def write_json(path: str | Path, report: dict, command: str) -> None:
     path = Path(path)
     machine = {"platform": platform.platform(), "torch": torch.__version__}
     record = {"command": command, "machine": machine, **report}
-    if path.exists():
-        try:
-            written = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            written = None
-        # Compared through JSON, so tuples and lists (and int keys) read back alike.
-        if isinstance(written, dict) and {k: v for k, v in written.items() if k != "machine"} == \
-                json.loads(json.dumps({k: v for k, v in record.items() if k != "machine"})):
-            print(f"unchanged {path}")
-            return
+    if _numbers(record) == _numbers(_read(path)):
+        print(f"unchanged {path}")
+        return
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=2) + "\n")
     print(f"wrote {path}")
+
+
+def _read(path: Path) -> dict | None:
+    """The record already at ``path``, None where there is none (or it is not a JSON object)."""
+    try:
+        written = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+    return written if isinstance(written, dict) else None
+
+
+def _numbers(record: dict | None) -> dict | None:
+    """A record without its machine, through JSON so tuples and int keys compare as written."""
+    if record is None:
+        return None
+    return json.loads(json.dumps({k: v for k, v in record.items() if k != "machine"}))
