@@ -122,8 +122,8 @@ REP := research/reports
 # Rebuild the research wing's reports (research/README.md) from its result trees: the seven-task
 # evidence under the sound critics (results/safe_sound), the experiment=safe evidence with FSRL's
 # critics (research/results/safe), Hopper's first sound-critic runs under the max read
-# (safe_sound_hopper_max), the 300k-frame runs (SafetyPointGoal1, graded labels), Table 2 at 100k
-# frames, the critic selection's rounds, and the Table 1 notes' tables.
+# (safe_sound_hopper_max), the 300k-frame runs (SafetyPointGoal1, graded labels), HalfCheetah's and
+# BallRun's first paper-settings runs (2026-11-23, S3RL's phase at the end), Table 2 at 100k frames, the critic selection's rounds, and the Table 1 notes' tables.
 research-report: $(STAMP)
 	$(BIN)/s3rl-report results/safe_sound --out $(REP)/safe_sound
 	$(BIN)/s3rl-report lagrangian results/safe_sound/*/seed* \
@@ -139,6 +139,10 @@ research-report: $(STAMP)
 		--group-by algo.contrastive_cfg.label --compare "$(GRADED):$(BINARY)"
 	$(BIN)/s3rl-report lagrangian $(R)/safe_300k/*/seed* \
 		--out $(REP)/safe_300k/lagrangian.json --plot $(REP)/safe_300k/lagrangian.png
+	$(BIN)/s3rl-report $(R)/reproduction_2026-11-23 --out $(REP)/reproduction_2026-11-23
+	$(BIN)/s3rl-report lagrangian $(R)/reproduction_2026-11-23/*/seed* \
+		--out $(REP)/reproduction_2026-11-23/lagrangian.json \
+		--plot $(REP)/reproduction_2026-11-23/lagrangian.png
 	$(BIN)/s3rl-report $(R)/table2 --no-embeddings --out $(REP)/table2 \
 		--compare s3rl_ddpg_lag:ddpg_lag --compare s3rl_ppo_lag:ppo_lag --compare s3rl_nolag:sac
 	$(BIN)/s3rl-report $(R)/critic_selection --no-embeddings --no-aggregate \
