@@ -793,6 +793,11 @@ def _figure3_section(
     ]
 
 
+def _remove(paths: list[Path]) -> None:
+    for path in paths:
+        path.unlink(missing_ok=True)
+
+
 def _figure4_section(
     by_task: dict[str, list[RunGroup]],
     out: Path,
@@ -807,10 +812,15 @@ def _figure4_section(
     from s3rl_torchrl.report import figures
 
     lines = ["## Figure 4: policy-encoder embeddings and linear probe", ""]
+    # A figure an earlier build drew into the same directory would otherwise stay beside a
+    # report that no longer shows it, drawn from runs that may have left the tree.
+    stale = [out / f"figure4_embedding_tsne{suffix}" for suffix in (".png", ".svg")]
     if not draw:
+        _remove(stale)
         return lines + ["Not drawn (`--no-embeddings`, or no finished run).", ""]
     panels, rows = _embedding_panels(by_task, reference, episodes, tsne_states, report.notes)
     if not panels:
+        _remove(stale)
         return lines + ["No checkpoint to roll out and no stored panel.", ""]
     report.figures += figures.embedding_tsne(panels, out)
     return lines + [

@@ -342,11 +342,13 @@ def test_exported_panels_redraw_figure4_without_the_checkpoints(tiny_runs, tmp_p
     assert len(probe_rows(original)) == 2
     assert probe_rows(rebuilt) == probe_rows(original)
     assert _non_empty(tmp_path / "r2" / "figure4_embedding_tsne.png")
-    # A tree with neither checkpoints nor panels: Figure 4 is left out with a note.
+    # A tree with neither checkpoints nor panels: Figure 4 is left out with a note, and the
+    # figure an earlier build drew into the same directory goes with it.
     assert main([str(tiny_runs), "--export-runs", str(tmp_path / "bare"), "--no-embeddings"]) == 0
-    bare = build_report(tmp_path / "bare", tmp_path / "r3")
+    bare = build_report(tmp_path / "bare", tmp_path / "r2")
     assert "No checkpoint to roll out and no stored panel." in bare.path.read_text()
     assert any("stored panel" in note for note in bare.notes)
+    assert not list((tmp_path / "r2").glob("figure4_embedding_tsne.*"))
 
 
 def test_compare_adds_pairs_beside_the_reference(tmp_path, make_run, capsys):
