@@ -123,7 +123,8 @@ REP := research/reports
 # evidence under the sound critics (results/safe_sound), the experiment=safe evidence with FSRL's
 # critics (research/results/safe), Hopper's first sound-critic runs under the max read
 # (safe_sound_hopper_max), the 300k-frame runs (SafetyPointGoal1, graded labels), HalfCheetah's and
-# BallRun's first paper-settings runs (2026-11-23, S3RL's phase at the end), Table 2 at 100k frames, the critic selection's rounds, and the Table 1 notes' tables.
+# BallRun's first paper-settings runs (2026-11-23, S3RL's phase at the end), Table 2 at 100k
+# frames, the critic selection's rounds, and the Table 1 notes' tables.
 research-report: $(STAMP)
 	$(BIN)/s3rl-report results/safe_sound --out $(REP)/safe_sound
 	$(BIN)/s3rl-report lagrangian results/safe_sound/*/seed* \
