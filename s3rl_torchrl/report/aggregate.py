@@ -21,7 +21,8 @@ ran and their seeds:
 
 Intervals are 95% percentile intervals of rliable's stratified bootstrap
 (``library.get_interval_estimates`` with one array per task, each resampled with replacement
-within the task: ``StratifiedIndependentBootstrap``). rliable 1.2.0 draws its resamples from
+within the task: ``StratifiedIndependentBootstrap``, its draw made cheaper by
+``_stratified_bootstrap``). rliable 1.2.0 draws its resamples from
 NumPy's global generator (``np.random.choice``; its ``random_state`` argument does not reach
 them), so every estimate is computed with that generator seeded (``seed``) and restored after:
 a report rebuilt from the same runs prints the same intervals.
@@ -47,6 +48,7 @@ without it and says so when asked for the aggregate.
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -142,15 +144,33 @@ def bootstrap(
     """(point, low, high) of ``func(*strata)`` (a 1-D array) with rliable's stratified
     bootstrap: each stratum (a task's runs, shape (runs, 1)) resampled with replacement on its
     own, ``reps`` times; 95% percentile interval."""
+    strata = list(strata)
+    # What library.get_interval_estimates does with a list of arrays, with its bootstrap's
+    # per-stratum draw made cheaper (_stratified_bootstrap).
+    with _global_seed(seed):
+        resampler = _stratified_bootstrap()(*strata)
+        point = np.atleast_1d(np.asarray(func(*strata), dtype=float))
+        interval = resampler.conf_int(func, reps=reps, size=CONFIDENCE, method="percentile")
+    interval = np.asarray(interval, dtype=float).reshape(2, -1)
+    return point, interval[0], interval[1]
+
+
+@functools.cache
+def _stratified_bootstrap() -> type:
+    """rliable's ``StratifiedIndependentBootstrap`` drawing each stratum's resample with
+    ``np.random.randint(0, n, shape)`` instead of ``np.random.choice(n, shape)``: NumPy's legacy
+    generator makes the one by calling the other (sampling with replacement, no weights), so the
+    draws, and every interval, are rliable's; ``choice``'s argument checks cost more than the
+    draw itself, once per task per resample (with ``choice``, about half of the bootstrap's time
+    on Table 1's 16 tasks: research/2026-11-21-benchmark-studies.md).
+    tests/report/test_aggregate.py holds it to ``library.get_interval_estimates``."""
     from rliable import library
 
-    with _global_seed(seed):
-        points, intervals = library.get_interval_estimates(
-            {"scores": list(strata)}, func, reps=reps, confidence_interval_size=CONFIDENCE
-        )
-    point = np.atleast_1d(np.asarray(points["scores"], dtype=float))
-    interval = np.asarray(intervals["scores"], dtype=float).reshape(2, -1)
-    return point, interval[0], interval[1]
+    class StratifiedBootstrap(library.StratifiedIndependentBootstrap):
+        def _get_indices(self, num_runs, array_shape, strata_indices):
+            return (np.random.randint(0, num_runs, array_shape), *strata_indices)
+
+    return StratifiedBootstrap
 
 
 def _scalar(func: Callable[..., float], per_task: Mapping[str, np.ndarray], reps: int,
@@ -185,9 +205,11 @@ def _improvement(x: np.ndarray, y: np.ndarray) -> float:
     """P(X > Y) from all pairs of runs, ties one half: rliable's per-task
     ``probability_of_improvement`` (the Mann-Whitney U statistic / (runs of X x runs of Y)),
     vectorised for the bootstrap's resamples (scipy's ``mannwhitneyu`` per resample is most of
-    a report's time); the tests check the two agree."""
+    a report's time); the tests check the two agree. The counts divided as ``np.mean`` of a
+    boolean array divides its exact sum: the same floats, at a third of ``np.mean``'s cost."""
     d = x.reshape(-1, 1) - y.reshape(1, -1)
-    return float(np.mean(d > 0) + 0.5 * np.mean(d == 0))
+    pairs = d.size
+    return np.count_nonzero(d > 0) / pairs + 0.5 * (np.count_nonzero(d == 0) / pairs)
 
 
 def probability_of_improvement_by_task(

@@ -147,6 +147,28 @@ def test_the_vectorised_statistics_are_rliables():
     np.testing.assert_allclose(profile, library.score_distributions(pooled, taus))
 
 
+@pytest.mark.parametrize("sizes", [(3, 3, 3), (1, 4, 2, 5), (6,)])
+def test_the_bootstrap_is_rliables_interval_estimate(sizes):
+    """report.aggregate.bootstrap draws its resamples without np.random.choice (speed): the
+    point and the interval stay library.get_interval_estimates', draw for draw, for equal and
+    unequal strata and a statistic with several values."""
+    from rliable import library
+
+    rng = np.random.default_rng(3)
+    strata = [rng.normal(size=(n, 1)) for n in sizes]
+
+    def func(*cols):
+        pooled = np.concatenate(cols)
+        return np.array([pooled.mean(), np.median(pooled), (pooled > 0).mean()])
+
+    point, low, high = agg.bootstrap(func, strata, reps=300, seed=11)
+    np.random.seed(11)
+    points, intervals = library.get_interval_estimates({"s": strata}, func, reps=300)
+    np.testing.assert_array_equal(point, points["s"])
+    np.testing.assert_array_equal(np.stack([low, high]), intervals["s"])
+    assert np.any(low < high)  # resamples that differ: the draws were compared, not constants
+
+
 def test_best_feasible_checkpoint_gets_its_own_aggregate_and_moves_the_top(tmp_path, make_run):
     # s3rl seed 1's best-feasible checkpoint on TaskA: reward 130 at cost 2 (within 10): the
     # new top; its last policy is unchanged.
