@@ -42,6 +42,7 @@ from s3rl_torchrl.report.aggregate import (
     run_scores,
 )
 from s3rl_torchrl.report.before_after import MISS_CAUSES, TARGET_KINDS
+from s3rl_torchrl.report.gap import format_difference
 from s3rl_torchrl.report.paper import paper_results_for
 from s3rl_torchrl.report.runs import Run, RunGroup, find_runs, group_runs
 from s3rl_torchrl.report.stats import paired_seed_test
@@ -161,9 +162,7 @@ def reproduction_rows(tasks: list[str]) -> list[str]:
             continue
         costs = {algo: {seed: final["cost_mean"] for seed, final in runs.items()}
                  for algo, runs in found.items()}
-        test = paired_seed_test(costs["s3rl"], costs["sac_lag"])
-        difference = (f"{test.difference:+.2f} [{test.ci_low:+.2f}, {test.ci_high:+.2f}], "
-                      f"p {test.pvalue:.2f}")
+        difference = format_difference(paired_seed_test(costs["s3rl"], costs["sac_lag"]))
         cells = [ours(found[algo], "last") for algo in ALGOS.values()]
         cells += [paper(task, algo) for algo in ALGOS.values()]
         rows.append(f"| {task} | " + " | ".join(cells) + f" | {difference} |")

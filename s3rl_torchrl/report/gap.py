@@ -32,7 +32,7 @@ from s3rl_torchrl.report.paper import paper_results_for
 from s3rl_torchrl.report.runs import PROTOCOLS, ReportError, final_evaluation, runs_by_key
 from s3rl_torchrl.report.stats import TestResult, paired_seed_test
 
-__all__ = ["Gap", "SettingAnswer", "TaskGap", "gap", "write_markdown"]
+__all__ = ["Gap", "SettingAnswer", "TaskGap", "format_difference", "gap", "write_markdown"]
 
 
 @dataclass
@@ -178,11 +178,13 @@ def gap(
                tasks, rows, shared, answers, missing)
 
 
-def _difference(test: TestResult) -> str:
+def format_difference(test: TestResult) -> str:
+    """A paired test's cell: the difference, its 95% interval and p; where the test is undefined
+    (one pair, or the same difference on every pair) the pairs and why instead."""
     if math.isnan(test.difference):
         return "–"
     if math.isnan(test.pvalue):
-        return f"{test.difference:+.2f} ({test.n})"
+        return f"{test.difference:+.2f} ({test.n}{'; ' + test.note if test.note else ''})"
     return (f"{test.difference:+.2f} [{test.ci_low:+.2f}, {test.ci_high:+.2f}], "
             f"p {test.pvalue:.2f}")
 
@@ -222,7 +224,7 @@ def write_markdown(result: Gap, path: str | Path, command: str = "") -> Path:
                 test = getattr(row, f"{metric}_test") if row is not None else None
                 lines.append(
                     f"| {task if i == 0 else ''} | {name} | {_mean(row, ref, metric)} "
-                    f"| {_mean(row, base, metric)} | {_difference(test) if test else '–'} "
+                    f"| {_mean(row, base, metric)} | {format_difference(test) if test else '–'} "
                     f"| {'' if i else ('–' if math.isnan(paper) else f'{paper:+.2f}')} |")
     lines += ["", "## Over the tasks", ""]
     if result.answers:

@@ -156,7 +156,7 @@ def paired_seed_test(reference: dict[int, float], baseline: dict[int, float]) ->
     seeds = sorted(set(reference) & set(baseline))
     a = np.array([reference[s] for s in seeds])
     b = np.array([baseline[s] for s in seeds])
-    n = f"{len(seeds)} pairs"
+    n = f"{len(seeds)} pair{'' if len(seeds) == 1 else 's'}"
     difference = float(np.mean(a - b)) if seeds else math.nan
     if len(seeds) < 2:
         return TestResult.not_run(

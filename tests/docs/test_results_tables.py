@@ -16,6 +16,7 @@ import json
 import math
 import re
 import statistics
+import warnings
 from collections import Counter
 
 import numpy as np
@@ -213,7 +214,13 @@ def test_reproduction_row_is_the_paper_settings_runs_beside_the_paper(row):
         reward, cost = numbers(cell)
         assert close(reward, paper["reward"]) and close(cost, paper["cost"])
     a, b = ([runs[algo][seed]["cost_mean"] for seed in SEEDS] for algo in ALGOS.values())
-    test = ttest_rel(a, b)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        test = ttest_rel(a, b)
+    if np.isnan(test.pvalue):  # the same difference on every seed: no test, the cell says so
+        assert len({x - y for x, y in zip(a, b)}) == 1
+        assert difference == f"{np.mean(a) - np.mean(b):+.2f} ({len(SEEDS)} pairs; no variance)"
+        return
     interval = test.confidence_interval()
     point, low, high, p = numbers(difference)
     assert difference.startswith("+" if np.mean(a) > np.mean(b) else "-")
@@ -450,7 +457,7 @@ def test_the_paper_settings_answer_says_what_its_tables_show():
             for setting, policy, _, cost, _ in table_rows(TEXT, GAP_HEADER)}
     point, low, high = map(float, gaps["paper settings", "last"])
     assert "an interval that holds 0.5" in answer and low <= 0.5 <= high
-    pvalues = [float(numbers(row[-1])[-1]) for row in REPRODUCTION]
+    pvalues = [float(numbers(row[-1])[-1]) for row in REPRODUCTION if "no variance" not in row[-1]]
     assert "no task's difference is below p 0.05" in answer and min(pvalues) >= 0.05
     drone = next(row for row in REPRODUCTION if row[0] == "SafetyDroneRun-v0")
     paper_gap = float(numbers(drone[3])[1]) - float(numbers(drone[4])[1])
