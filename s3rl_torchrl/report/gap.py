@@ -180,13 +180,14 @@ def gap(
 
 def format_difference(test: TestResult) -> str:
     """A paired test's cell: the difference, its 95% interval and p; where the test is undefined
-    (one pair, or the same difference on every pair) the pairs and why instead."""
+    (one pair, or no difference on any pair) the pairs and why instead. The same non-zero
+    difference on every pair keeps scipy's p of 0, flagged."""
     if math.isnan(test.difference):
         return "–"
     if math.isnan(test.pvalue):
         return f"{test.difference:+.2f} ({test.n}{'; ' + test.note if test.note else ''})"
     return (f"{test.difference:+.2f} [{test.ci_low:+.2f}, {test.ci_high:+.2f}], "
-            f"p {test.pvalue:.2f}")
+            f"p {test.pvalue:.2f}" + (f" ({test.note})" if test.note else ""))
 
 
 def _mean(row: TaskGap | None, algo: str, metric: str) -> str:

@@ -157,7 +157,8 @@ def test_no_setting_answers_on_a_task_the_first_has_one_algo_of(presets, make_ru
 def test_a_difference_cell_says_why_its_test_is_undefined():
     # scipy's ttest_rel: 20, 30, 40 against 5, 6, 7 (a spread of differences) gives a p and an
     # interval; the same cost on every seed of both algos (SafetyBallRun-v0 under the paper's
-    # settings: 92 of 100 steps) leaves t undefined; one pair is no test at all.
+    # settings: 92 of 100 steps) leaves t undefined; the same shift on every seed gives scipy's
+    # p of 0 (t infinite), kept but flagged; one pair is no test at all.
     spread = paired_seed_test({10: 20.0, 20: 30.0, 30: 40.0}, {10: 5.0, 20: 6.0, 30: 7.0})
     expected = stats.ttest_rel([20, 30, 40], [5, 6, 7])
     interval = expected.confidence_interval(0.95)
@@ -165,6 +166,8 @@ def test_a_difference_cell_says_why_its_test_is_undefined():
         f"+24.00 [{interval.low:+.2f}, {interval.high:+.2f}], p {expected.pvalue:.2f}")
     same = paired_seed_test({s: 92.0 for s in (10, 20, 30)}, {s: 92.0 for s in (10, 20, 30)})
     assert format_difference(same) == "+0.00 (3 pairs; no variance)"
+    shifted = paired_seed_test({10: 3.0, 20: 4.0, 30: 5.0}, {10: 1.0, 20: 2.0, 30: 3.0})
+    assert format_difference(shifted) == "+2.00 [+2.00, +2.00], p 0.00 (no variance)"
     assert format_difference(paired_seed_test({10: 3.0}, {10: 1.0})) == (
         "+2.00 (1 pair; needs >= 2 seeds run by both)")
     assert format_difference(paired_seed_test({10: 3.0}, {20: 1.0})) == "–"
