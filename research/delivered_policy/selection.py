@@ -14,9 +14,9 @@ With `--export`, each run is copied there as it finishes (`s3rl-report --export-
 config.json, metrics.csv, final_eval.json), and a run whose copy is there already is skipped:
 checkpoints live only on the machine that wrote them, the copies in version control.
 
-Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, none
-left: the four of RETIRED_GOAL_CANDIDATES missed and WITHDRAWN_GOAL_CANDIDATES' was withdrawn;
-a new one would run one at a time: `--runs '<name>/sac_lag_*/seed1' --workers 1`):
+Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, the
+two horizons, after the four of RETIRED_GOAL_CANDIDATES missed and WITHDRAWN_GOAL_CANDIDATES' was
+withdrawn; a new one runs SAC-Lag seed 1 first: `--runs '<name>/sac_lag_*/seed1'`):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
@@ -88,7 +88,16 @@ RETIRED_GOAL_CANDIDATES["goal_split"] = ["algo.cost_target_read=mean"]
 # episodes); 5x the updates moved the policy off the goal as the other three did
 # (research/2026-11-28-delivered-policy.md). Retired; no SafetyPointGoal1 candidate is left.
 RETIRED_GOAL_CANDIDATES["goal_budget"] = ["algo.update_per_step=1", "algo.lagrangian_lr=6e-7"]
-GOAL_CANDIDATES: dict[str, list[str]] = {}
+# A fifth direction (2026-12-07, research/2026-12-07-pointgoal1-horizon.md): every run so far
+# held the goal at a training cost of 43-57 and never learned to go around the hazards. A
+# discount of 0.99 asks the cost critic for the hazards of the next ~100 steps, most of which no
+# action now can avoid; a shorter horizon (both critics: the goal reward is dense, the distance
+# closed each step) leaves the cost of the hazard ahead, which a turn avoids. SAC-Lag seed 1 of
+# each first, the other three runs of one only if it reaches reward >= 20 at cost <= 25.
+GOAL_CANDIDATES: dict[str, list[str]] = {
+    "goal_horizon20": ["algo.gamma=0.95"],
+    "goal_horizon10": ["algo.gamma=0.9"],
+}
 FRAMES = 500_000
 # (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
 # results/table1 and results/safe_sound, the largest misses first (the order of a seed's runs).

@@ -247,13 +247,14 @@ def test_the_preset_is_the_rules_choice():
 def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     """goal_budget's run (retired after SAC-Lag seed 1) composes and validates, with 5x the
     gradient steps per frame and lambda's rate per update cut by as much (lambda updates once
-    per gradient step under experiment=safe); with every SafetyPointGoal1 candidate retired the
-    queue holds none of its runs, and `--runs` queues only the runs its glob names."""
+    per gradient step under experiment=safe); the queue holds the two horizon candidates'
+    SafetyPointGoal1 runs at 1M frames and no retired one's, and `--runs` queues only the runs
+    its glob names."""
     from s3rl_torchrl.trainer import validate
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert not selection.GOAL_CANDIDATES
+    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon20", "goal_horizon10"}
     assert set(selection.RETIRED_GOAL_CANDIDATES) == {"goal_mean", "goal_bound", "goal_split",
                                                       "goal_budget"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
@@ -265,10 +266,24 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert budget.algo.lagrangian_lr * budget.algo.update_per_step == pytest.approx(
         preset.algo.lagrangian_lr * preset.algo.update_per_step)
     jobs = list(selection.jobs(tmp_path))
-    assert not [run_dir for run_dir, _ in jobs if "SafetyPointGoal1" in str(run_dir)]
+    goal = {run_dir.relative_to(tmp_path).as_posix(): overrides
+            for run_dir, overrides in jobs if "SafetyPointGoal1" in str(run_dir)}
+    assert sorted(goal) == sorted(
+        f"{name}/{algo}_SafetyPointGoal1-v0/seed{seed}" for name in selection.GOAL_CANDIDATES
+        for algo in ("sac_lag", "s3rl") for seed in (1, 2))
+    for name, gamma in (("goal_horizon20", 0.95), ("goal_horizon10", 0.9)):
+        overrides = goal[f"{name}/sac_lag_SafetyPointGoal1-v0/seed1"]
+        assert "collector.total_frames=1000000" in overrides
+        composed = validate(compose_train(*overrides[:-4]))  # without the run's own settings
+        assert composed.algo.gamma == gamma
+        assert composed.algo.lagrangian_lr == preset.algo.lagrangian_lr  # the task's settings
+        assert composed.task.cost_limit == 25.0
+    first = [run_dir for run_dir, _ in jobs
+             if selection.selected((run_dir, []), tmp_path, "goal_horizon*/sac_lag_*/seed1")]
+    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_horizon20", "goal_horizon10"]
     picked = [run_dir for run_dir, _ in jobs
               if selection.selected((run_dir, []), tmp_path, "margin/sac_lag_*/seed1")]
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7  # two candidates, two seeds, seven cases
+    assert len(jobs) == 2 * 2 * 7 + 2 * 2 * 2  # margin/aim on seven cases; two goal candidates
