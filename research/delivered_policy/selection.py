@@ -98,6 +98,12 @@ GOAL_CANDIDATES: dict[str, list[str]] = {
     "goal_horizon20": ["algo.gamma=0.95"],
     "goal_horizon10": ["algo.gamma=0.9"],
 }
+# A sixth (the same note): the replay buffer holds the last 100k frames, so ~100k frames after the
+# policy slows down no goal-reaching transition is left to train on (the committed runs' reward
+# critic fell from ~2.2 to -0.3), and when lambda falls back, too slowly to beat that (at most
+# ~0.006 per 10k frames at the task's rate), there is nothing left to go back to. OmniSafe's
+# SACLag keeps 1M frames.
+GOAL_CANDIDATES["goal_buffer"] = ["algo.buffer_size=1000000"]
 FRAMES = 500_000
 # (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
 # results/table1 and results/safe_sound, the largest misses first (the order of a seed's runs).

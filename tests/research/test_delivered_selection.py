@@ -254,7 +254,7 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon20", "goal_horizon10"}
+    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon20", "goal_horizon10", "goal_buffer"}
     assert set(selection.RETIRED_GOAL_CANDIDATES) == {"goal_mean", "goal_bound", "goal_split",
                                                       "goal_budget"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
@@ -271,11 +271,13 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert sorted(goal) == sorted(
         f"{name}/{algo}_SafetyPointGoal1-v0/seed{seed}" for name in selection.GOAL_CANDIDATES
         for algo in ("sac_lag", "s3rl") for seed in (1, 2))
-    for name, gamma in (("goal_horizon20", 0.95), ("goal_horizon10", 0.9)):
+    for name, gamma, buffer in (("goal_horizon20", 0.95, 100_000),
+                                ("goal_horizon10", 0.9, 100_000), ("goal_buffer", 0.99, 1_000_000)):
         overrides = goal[f"{name}/sac_lag_SafetyPointGoal1-v0/seed1"]
         assert "collector.total_frames=1000000" in overrides
         composed = validate(compose_train(*overrides[:-4]))  # without the run's own settings
-        assert composed.algo.gamma == gamma
+        assert (composed.algo.gamma, composed.algo.buffer_size) == (gamma, buffer)
+        assert (preset.algo.gamma, preset.algo.buffer_size) == (0.99, 100_000)
         assert composed.algo.lagrangian_lr == preset.algo.lagrangian_lr  # the task's settings
         assert composed.task.cost_limit == 25.0
     first = [run_dir for run_dir, _ in jobs
@@ -286,4 +288,4 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7 + 2 * 2 * 2  # margin/aim on seven cases; two goal candidates
+    assert len(jobs) == 2 * 2 * 7 + 3 * 2 * 2  # margin/aim on seven cases; three goal candidates
