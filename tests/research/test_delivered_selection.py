@@ -247,16 +247,16 @@ def test_the_preset_is_the_rules_choice():
 def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     """goal_budget's run (retired after SAC-Lag seed 1) composes and validates, with 5x the
     gradient steps per frame and lambda's rate per update cut by as much (lambda updates once
-    per gradient step under experiment=safe); the queue holds the two horizon candidates'
-    SafetyPointGoal1 runs at 1M frames and no retired one's, and `--runs` queues only the runs
-    its glob names."""
+    per gradient step under experiment=safe); the queue holds the open SafetyPointGoal1
+    candidates' runs at 1M frames and no retired one's, each candidate composes to what its
+    note says, and `--runs` queues only the runs its glob names."""
     from s3rl_torchrl.trainer import validate
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon20", "goal_horizon10", "goal_buffer"}
+    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon10", "goal_buffer_split"}
     assert set(selection.RETIRED_GOAL_CANDIDATES) == {"goal_mean", "goal_bound", "goal_split",
-                                                      "goal_budget"}
+                                                      "goal_budget", "goal_horizon20", "goal_buffer"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
     preset = validate(compose_train("experiment=safe", *task))
     budget = validate(compose_train(
@@ -271,21 +271,29 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert sorted(goal) == sorted(
         f"{name}/{algo}_SafetyPointGoal1-v0/seed{seed}" for name in selection.GOAL_CANDIDATES
         for algo in ("sac_lag", "s3rl") for seed in (1, 2))
+    retired = selection.RETIRED_GOAL_CANDIDATES
     for name, gamma, buffer in (("goal_horizon20", 0.95, 100_000),
                                 ("goal_horizon10", 0.9, 100_000), ("goal_buffer", 0.99, 1_000_000)):
-        overrides = goal[f"{name}/sac_lag_SafetyPointGoal1-v0/seed1"]
-        assert "collector.total_frames=1000000" in overrides
-        composed = validate(compose_train(*overrides[:-4]))  # without the run's own settings
+        composed = validate(compose_train(
+            "experiment=safe", *task, *selection.GOAL_CANDIDATES.get(name, retired.get(name))))
         assert (composed.algo.gamma, composed.algo.buffer_size) == (gamma, buffer)
         assert (preset.algo.gamma, preset.algo.buffer_size) == (0.99, 100_000)
         assert composed.algo.lagrangian_lr == preset.algo.lagrangian_lr  # the task's settings
         assert composed.task.cost_limit == 25.0
+    both = validate(compose_train(
+        "experiment=safe", *task, *selection.GOAL_CANDIDATES["goal_buffer_split"]))
+    assert (both.algo.buffer_size, both.algo.cost_target_read, both.algo.cost_critic_read) == (
+        1_000_000, "mean", preset.algo.cost_critic_read)
+    assert preset.algo.cost_target_read is None and preset.algo.cost_critic_read == "max"
+    overrides = goal["goal_horizon10/sac_lag_SafetyPointGoal1-v0/seed1"]
+    assert "collector.total_frames=1000000" in overrides and "algo.gamma=0.9" in overrides
     first = [run_dir for run_dir, _ in jobs
-             if selection.selected((run_dir, []), tmp_path, "goal_horizon*/sac_lag_*/seed1")]
-    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_horizon20", "goal_horizon10"]
+             if selection.selected((run_dir, []), tmp_path, "goal_*/sac_lag_*/seed1")]
+    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_horizon10",
+                                                                 "goal_buffer_split"]
     picked = [run_dir for run_dir, _ in jobs
               if selection.selected((run_dir, []), tmp_path, "margin/sac_lag_*/seed1")]
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7 + 3 * 2 * 2  # margin/aim on seven cases; three goal candidates
+    assert len(jobs) == 2 * 2 * 7 + 2 * 2 * 2  # margin/aim on seven cases; two goal candidates
