@@ -254,9 +254,10 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert set(selection.GOAL_CANDIDATES) == {"goal_horizon10", "goal_buffer_split"}
-    assert set(selection.RETIRED_GOAL_CANDIDATES) == {"goal_mean", "goal_bound", "goal_split",
-                                                      "goal_budget", "goal_horizon20", "goal_buffer"}
+    assert set(selection.GOAL_CANDIDATES) == {"goal_buffer_split"}
+    assert set(selection.RETIRED_GOAL_CANDIDATES) == {
+        "goal_mean", "goal_bound", "goal_split", "goal_budget", "goal_horizon20", "goal_horizon10",
+        "goal_buffer"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
     preset = validate(compose_train("experiment=safe", *task))
     budget = validate(compose_train(
@@ -285,15 +286,15 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert (both.algo.buffer_size, both.algo.cost_target_read, both.algo.cost_critic_read) == (
         1_000_000, "mean", preset.algo.cost_critic_read)
     assert preset.algo.cost_target_read is None and preset.algo.cost_critic_read == "max"
-    overrides = goal["goal_horizon10/sac_lag_SafetyPointGoal1-v0/seed1"]
-    assert "collector.total_frames=1000000" in overrides and "algo.gamma=0.9" in overrides
+    overrides = goal["goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1"]
+    assert "collector.total_frames=1000000" in overrides
+    assert "algo.buffer_size=1000000" in overrides and "algo.cost_target_read=mean" in overrides
     first = [run_dir for run_dir, _ in jobs
              if selection.selected((run_dir, []), tmp_path, "goal_*/sac_lag_*/seed1")]
-    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_horizon10",
-                                                                 "goal_buffer_split"]
+    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_buffer_split"]
     picked = [run_dir for run_dir, _ in jobs
               if selection.selected((run_dir, []), tmp_path, "margin/sac_lag_*/seed1")]
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7 + 2 * 2 * 2  # margin/aim on seven cases; two goal candidates
+    assert len(jobs) == 2 * 2 * 7 + 2 * 2  # margin/aim on seven cases; one goal candidate
