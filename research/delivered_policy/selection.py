@@ -86,7 +86,7 @@ RETIRED_GOAL_CANDIDATES["goal_split"] = ["algo.cost_target_read=mean"]
 # not: the goal held to ~300k (evaluation reward 18.5) and was gone by 350k (3.0) with lambda at
 # 0.15, and at 1M the last policy is -0.6 / 87.3, the pick -0.5 / 91.4 (0.0 on its picking
 # episodes); 5x the updates moved the policy off the goal as the other three did
-# (research/2026-11-28-delivered-policy.md). Retired; no SafetyPointGoal1 candidate is left.
+# (research/2026-11-28-delivered-policy.md). Retired.
 RETIRED_GOAL_CANDIDATES["goal_budget"] = ["algo.update_per_step=1", "algo.lagrangian_lr=6e-7"]
 # A fifth direction (2026-12-07, research/2026-12-07-pointgoal1-horizon.md): every run so far
 # held the goal at a training cost of 43-57 and never learned to go around the hazards. A
