@@ -254,10 +254,10 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert set(selection.GOAL_CANDIDATES) == {"goal_buffer_split"}
+    assert selection.GOAL_CANDIDATES == {}
     assert set(selection.RETIRED_GOAL_CANDIDATES) == {
         "goal_mean", "goal_bound", "goal_split", "goal_budget", "goal_horizon20", "goal_horizon10",
-        "goal_buffer"}
+        "goal_buffer", "goal_buffer_split"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
     preset = validate(compose_train("experiment=safe", *task))
     budget = validate(compose_train(
@@ -269,9 +269,7 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     jobs = list(selection.jobs(tmp_path))
     goal = {run_dir.relative_to(tmp_path).as_posix(): overrides
             for run_dir, overrides in jobs if "SafetyPointGoal1" in str(run_dir)}
-    assert sorted(goal) == sorted(
-        f"{name}/{algo}_SafetyPointGoal1-v0/seed{seed}" for name in selection.GOAL_CANDIDATES
-        for algo in ("sac_lag", "s3rl") for seed in (1, 2))
+    assert goal == {}  # every candidate retired: no SafetyPointGoal1 run is queued
     retired = selection.RETIRED_GOAL_CANDIDATES
     for name, gamma, buffer in (("goal_horizon20", 0.95, 100_000),
                                 ("goal_horizon10", 0.9, 100_000), ("goal_buffer", 0.99, 1_000_000)):
@@ -282,19 +280,37 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
         assert composed.algo.lagrangian_lr == preset.algo.lagrangian_lr  # the task's settings
         assert composed.task.cost_limit == 25.0
     both = validate(compose_train(
-        "experiment=safe", *task, *selection.GOAL_CANDIDATES["goal_buffer_split"]))
+        "experiment=safe", *task, *retired["goal_buffer_split"]))
     assert (both.algo.buffer_size, both.algo.cost_target_read, both.algo.cost_critic_read) == (
         1_000_000, "mean", preset.algo.cost_critic_read)
     assert preset.algo.cost_target_read is None and preset.algo.cost_critic_read == "max"
-    overrides = goal["goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1"]
-    assert "collector.total_frames=1000000" in overrides
-    assert "algo.buffer_size=1000000" in overrides and "algo.cost_target_read=mean" in overrides
-    first = [run_dir for run_dir, _ in jobs
-             if selection.selected((run_dir, []), tmp_path, "goal_*/sac_lag_*/seed1")]
-    assert [p.relative_to(tmp_path).parts[0] for p in first] == ["goal_buffer_split"]
     picked = [run_dir for run_dir, _ in jobs
               if selection.selected((run_dir, []), tmp_path, "margin/sac_lag_*/seed1")]
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7 + 2 * 2  # margin/aim on seven cases; one goal candidate
+    assert len(jobs) == 2 * 2 * 7  # margin/aim on seven cases
+
+
+def test_goal_windows_count_the_three_epoch_windows_on_target_by_hand():
+    target_windows = _script("goal_windows").target_windows
+    # Epochs at 100k (the warm-up's last, left out), then five: windows (110-130k), (120-140k),
+    # (130-150k) have mean rewards 20, 22, 18 and mean costs 20, 30, 20.
+    frames = [100_000, 110_000, 120_000, 130_000, 140_000, 150_000]
+    reward = [99.0, 18.0, 21.0, 21.0, 24.0, 9.0]
+    cost = [0.0, 0.0, 30.0, 30.0, 30.0, 0.0]
+    assert target_windows(frames, reward, cost, 25.0) == (3, 1, 20.0, 130_000)
+    assert target_windows(frames, reward, cost, 35.0) == (3, 2, 22.0, 140_000)
+    # No window within the limit: no best; fewer epochs than a window: no window.
+    windows, hits, best, at = target_windows(frames, reward, [40.0] * 6, 25.0)
+    assert (windows, hits, at) == (3, 0, None) and best != best
+    assert target_windows(frames[:3], reward[:3], cost[:3], 25.0)[:2] == (0, 0)
+
+
+def test_goal_windows_read_the_committed_goal_runs():
+    module = _script("goal_windows")
+    rows = {row[0]: row for row in module.rows([RESULTS])}
+    # goal_buffer_split's SAC-Lag seed 1 (its metrics.csv): 88 windows past 100k frames.
+    row = rows["delivered_selection/goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1"]
+    assert row[1:4] == ["1000k", "88", "3"] and row[4] == "25.7 (340k)"
+    assert all(name.split("/")[2].startswith("sac_lag_SafetyPointGoal1") for name in rows)

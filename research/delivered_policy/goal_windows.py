@@ -1,0 +1,77 @@
+"""How long SafetyPointGoal1's runs held issue 60's goal target while they trained: per run, the
+windows of 3 consecutive epochs (3 x 2 evaluation episodes) past lambda's warm-up whose mean
+evaluation reward is >= 20 at a mean evaluation cost <= the limit, and the most reward of a
+window within the limit (research/2026-12-07-pointgoal1-horizon.md, "What ten settings say").
+
+    python research/delivered_policy/goal_windows.py research/results/delivered_selection \
+        results/table1_v2
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from s3rl_torchrl.report.runs import find_runs
+
+TASK = "SafetyPointGoal1-v0"
+REWARD_TARGET = 20.0  # the issue's: mean reward >= 20 at mean cost <= 25
+WIDTH = 3
+START_FRAMES = 100_000  # SAFE_TASK_SETTINGS' warm-up: lambda is 0 before it
+
+
+def target_windows(
+    frames, reward, cost, limit: float, *, reward_target: float = REWARD_TARGET,
+    width: int = WIDTH, start: int = START_FRAMES,
+) -> tuple[int, int, float, int | None]:
+    """(windows, windows on target, the most reward of a window within the limit, the last frame
+    of that window) over the epochs after ``start`` frames; a window is ``width`` consecutive
+    epochs, its reward and cost their means."""
+    frames, reward, cost = (np.asarray(a, dtype=float) for a in (frames, reward, cost))
+    keep = frames > start
+    frames, reward, cost = frames[keep], reward[keep], cost[keep]
+    if frames.size < width:
+        return 0, 0, float("nan"), None
+    kernel = np.ones(width) / width
+    mean_reward = np.convolve(reward, kernel, mode="valid")
+    mean_cost = np.convolve(cost, kernel, mode="valid")
+    within = mean_cost <= limit
+    hits = int(np.sum(within & (mean_reward >= reward_target)))
+    if not within.any():
+        return mean_reward.size, hits, float("nan"), None
+    best = int(np.argmax(np.where(within, mean_reward, -np.inf)))
+    return mean_reward.size, hits, float(mean_reward[best]), int(frames[best + width - 1])
+
+
+def rows(roots: list[Path]) -> list[list[str]]:
+    table = []
+    for root in roots:
+        for run in find_runs(root):
+            if run.task != TASK:
+                continue
+            frames, reward = run.column("eval/reward")
+            _, cost = run.column("eval/cost")
+            windows, hits, best, at = target_windows(frames, reward, cost, run.cost_limit)
+            table.append([
+                str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", str(windows),
+                str(hits), "–" if at is None else f"{best:.1f} ({at // 1000}k)",
+            ])
+    return table
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("roots", nargs="+", type=Path, help="directories of exported runs")
+    args = parser.parse_args()
+    header = ["run", "frames", "3-epoch windows", f"reward >= {REWARD_TARGET:g} at cost <= limit",
+              "most reward within the limit (window's last frame)"]
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for row in rows(args.roots):
+        print("| " + " | ".join(row) + " |")
+
+
+if __name__ == "__main__":
+    main()
