@@ -10,11 +10,15 @@ window within the limit (research/2026-12-07-pointgoal1-horizon.md, "What ten se
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from s3rl_torchrl.report.runs import find_runs
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
+from summarise import markdown  # noqa: E402
 
 TASK = "SafetyPointGoal1-v0"
 REWARD_TARGET = 20.0  # the issue's: mean reward >= 20 at mean cost <= 25
@@ -67,10 +71,7 @@ def main() -> None:
     args = parser.parse_args()
     header = ["run", "frames", "3-epoch windows", f"reward >= {REWARD_TARGET:g} at cost <= limit",
               "most reward within the limit (window's last frame)"]
-    print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * len(header))
-    for row in rows(args.roots):
-        print("| " + " | ".join(row) + " |")
+    print("\n".join(markdown(header, rows(args.roots))))
 
 
 if __name__ == "__main__":
