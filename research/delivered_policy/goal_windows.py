@@ -2,9 +2,12 @@
 windows of 3 consecutive epochs (3 x 2 evaluation episodes) past lambda's warm-up whose mean
 evaluation reward is >= 20 at a mean evaluation cost <= the limit, and the most reward of a
 window within the limit (research/2026-12-07-pointgoal1-horizon.md, "What ten settings say").
+With ``--spans``, the means over spans of frames instead (the note's 3M tables):
 
     python research/delivered_policy/goal_windows.py research/results/delivered_selection \
         results/table1_v2
+    python research/delivered_policy/goal_windows.py research/results/goal_3m \
+        --spans 0.8-1,1-1.5,1.5-2,2-2.5,2.5-3
 """
 
 from __future__ import annotations
@@ -65,10 +68,68 @@ def rows(roots: list[Path]) -> list[list[str]]:
     return table
 
 
+# (header, columns): a span's means, each cell "a / b" of two metrics.csv columns.
+SPAN_CELLS = [
+    ("eval reward / cost", ("eval/reward", "eval/cost")),
+    ("training reward / cost", ("train/reward", "train/cost")),
+    ("lambda", ("lagrangian",)),
+    ("reward critic / return", ("critic/reward_q", "critic/reward_return")),
+    ("cost critic / return", ("critic/cost_q", "critic/cost_return")),
+]
+
+
+def span_means(frames, values, low: float, high: float) -> float | None:
+    """The mean of ``values`` over the epochs with ``low < frames <= high``; None unless the run
+    reached ``high``."""
+    frames, values = np.asarray(frames, dtype=float), np.asarray(values, dtype=float)
+    if frames.size == 0 or frames.max() < high:
+        return None
+    return float(values[(frames > low) & (frames <= high)].mean())
+
+
+def span_rows(roots: list[Path], spans: list[tuple[float, float]]) -> list[list[str]]:
+    table = []
+    for root in roots:
+        for run in find_runs(root):
+            if run.task != TASK:
+                continue
+            for low, high in spans:
+                cells = []
+                for _, columns in SPAN_CELLS:
+                    means = [span_means(*run.column(column), low, high) for column in columns]
+                    if None in means:
+                        break
+                    digits = 2 if len(columns) == 1 or columns[0].startswith("critic") else 1
+                    cells.append(" / ".join(f"{mean:.{digits}f}" for mean in means))
+                else:
+                    table.append([str(run.path.relative_to(root.parent)),
+                                  f"{low / 1e6:g}-{high / 1e6:g}M", *cells])
+    return table
+
+
+def parse_spans(text: str) -> list[tuple[float, float]]:
+    """``"0.8-1,1-1.5"`` (millions of frames) -> ``[(800000.0, 1000000.0), (1e6, 1.5e6)]``."""
+    spans = []
+    for span in text.split(","):
+        low, _, high = span.partition("-")
+        try:
+            spans.append((float(low) * 1e6, float(high) * 1e6))
+        except ValueError:
+            raise SystemExit(f"--spans: {span!r} is not <low>-<high> in millions of frames, "
+                             "e.g. 0.8-1,1-1.5") from None
+    return spans
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("roots", nargs="+", type=Path, help="directories of exported runs")
+    parser.add_argument("--spans", default=None,
+                        help="means over these spans of frames instead, in millions: 0.8-1,1-1.5")
     args = parser.parse_args()
+    if args.spans is not None:
+        header = ["run", "frames", *(name for name, _ in SPAN_CELLS)]
+        print("\n".join(markdown(header, span_rows(args.roots, parse_spans(args.spans)))))
+        return
     header = ["run", "frames", "3-epoch windows", f"reward >= {REWARD_TARGET:g} at cost <= limit",
               "most reward within the limit (window's last frame)"]
     print("\n".join(markdown(header, rows(args.roots))))

@@ -322,3 +322,19 @@ def test_goal_windows_read_the_committed_goal_runs():
     row = rows["delivered_selection/goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1"]
     assert row[1:4] == ["1000k", "88", "3"] and row[4] == "25.7 (340k)"
     assert all(name.split("/")[2].startswith("sac_lag_SafetyPointGoal1") for name in rows)
+
+
+def test_goal_windows_span_means_by_hand_and_on_the_3m_runs():
+    module = _script("goal_windows")
+    frames = [100_000, 200_000, 300_000, 400_000]
+    values = [1.0, 2.0, 4.0, 9.0]
+    assert module.span_means(frames, values, 100_000, 300_000) == 3.0  # (2 + 4) / 2: low excluded
+    assert module.span_means(frames, values, 300_000, 500_000) is None  # the run stops at 400k
+    assert module.parse_spans("0.8-1,2.5-3") == [(800_000, 1_000_000), (2_500_000, 3_000_000)]
+    with pytest.raises(SystemExit, match="not <low>-<high>"):
+        module.parse_spans("1-x")
+    rows = module.span_rows([RESULTS.parent / "goal_3m"], module.parse_spans("2.5-3,2.5-3.5"))
+    # the note's last goal_buffer_split row; no row for a span past the runs' 3M frames
+    assert ["goal_3m/goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1", "2.5-3M", "15.3 / 10.1",
+            "17.0 / 15.1", "0.56", "0.64 / 1.68", "1.19 / 1.62"] in rows
+    assert {row[1] for row in rows} == {"2.5-3M"}
