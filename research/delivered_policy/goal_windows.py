@@ -68,13 +68,13 @@ def rows(roots: list[Path]) -> list[list[str]]:
     return table
 
 
-# (header, columns): a span's means, each cell "a / b" of two metrics.csv columns.
+# (header, metrics.csv columns, decimals): a span's means, "a / b" where a cell has two columns.
 SPAN_CELLS = [
-    ("eval reward / cost", ("eval/reward", "eval/cost")),
-    ("training reward / cost", ("train/reward", "train/cost")),
-    ("lambda", ("lagrangian",)),
-    ("reward critic / return", ("critic/reward_q", "critic/reward_return")),
-    ("cost critic / return", ("critic/cost_q", "critic/cost_return")),
+    ("eval reward / cost", ("eval/reward", "eval/cost"), 1),
+    ("training reward / cost", ("train/reward", "train/cost"), 1),
+    ("lambda", ("lagrangian",), 2),
+    ("reward critic / return", ("critic/reward_q", "critic/reward_return"), 2),
+    ("cost critic / return", ("critic/cost_q", "critic/cost_return"), 2),
 ]
 
 
@@ -93,13 +93,14 @@ def span_rows(roots: list[Path], spans: list[tuple[float, float]]) -> list[list[
         for run in find_runs(root):
             if run.task != TASK:
                 continue
+            series = {column: run.column(column)
+                      for _, columns, _ in SPAN_CELLS for column in columns}
             for low, high in spans:
                 cells = []
-                for _, columns in SPAN_CELLS:
-                    means = [span_means(*run.column(column), low, high) for column in columns]
+                for _, columns, digits in SPAN_CELLS:
+                    means = [span_means(*series[column], low, high) for column in columns]
                     if None in means:
                         break
-                    digits = 2 if len(columns) == 1 or columns[0].startswith("critic") else 1
                     cells.append(" / ".join(f"{mean:.{digits}f}" for mean in means))
                 else:
                     table.append([str(run.path.relative_to(root.parent)),
@@ -127,7 +128,7 @@ def main() -> None:
                         help="means over these spans of frames instead, in millions: 0.8-1,1-1.5")
     args = parser.parse_args()
     if args.spans is not None:
-        header = ["run", "frames", *(name for name, _ in SPAN_CELLS)]
+        header = ["run", "frames", *(name for name, _, _ in SPAN_CELLS)]
         print("\n".join(markdown(header, span_rows(args.roots, parse_spans(args.spans)))))
         return
     header = ["run", "frames", "3-epoch windows", f"reward >= {REWARD_TARGET:g} at cost <= limit",
