@@ -14,9 +14,9 @@ With `--export`, each run is copied there as it finishes (`s3rl-report --export-
 config.json, metrics.csv, final_eval.json), and a run whose copy is there already is skipped:
 checkpoints live only on the machine that wrote them, the copies in version control.
 
-Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, the
-open one, after the eight of RETIRED_GOAL_CANDIDATES missed and WITHDRAWN_GOAL_CANDIDATES'
-was withdrawn; a new one runs SAC-Lag seed 1 first: `--runs '<name>/sac_lag_*/seed1'`):
+Candidates (algo.* keys, objectives/lagrangian.py; SafetyPointGoal1's: GOAL_CANDIDATES, empty
+since the nine of RETIRED_GOAL_CANDIDATES missed and WITHDRAWN_GOAL_CANDIDATES' was withdrawn;
+a new one runs SAC-Lag seed 1 first: `--runs '<name>/sac_lag_*/seed1'`):
 - margin: lagrangian_target=0.7 (J, the training episodes' cost, held at 7 of a limit of 10);
 - aim: lagrangian_target=0.8 and lagrangian_eval_window=6 (J is the larger of the training
   cost and the last 6 deterministic evaluation episodes' mean: 3 epochs of 2 episodes).
@@ -115,11 +115,14 @@ RETIRED_GOAL_CANDIDATES["goal_buffer_split"] = [*RETIRED_GOAL_CANDIDATES["goal_b
 # update budget was tried only where the 100k buffer lost the goal first (`goal_budget`). The
 # eleventh (2026-12-07, stated in research/2026-12-07-pointgoal1-horizon.md before its run): the
 # two together, the goal held by the buffer and the split read while 5x the updates per frame
-# learn the way around (lambda's rate per update cut 5x, as in goal_budget).
-GOAL_CANDIDATES: dict[str, list[str]] = {
-    "goal_buffer_budget": [*RETIRED_GOAL_CANDIDATES["goal_buffer_split"],
-                           *RETIRED_GOAL_CANDIDATES["goal_budget"]],
-}
+# learn the way around (lambda's rate per update cut 5x, as in goal_budget). It missed on SAC-Lag
+# seed 1: the goal held to 920k (lambda 0.46) at a training cost of 43.4 while held, as
+# `goal_buffer_split` at 0.2 updates per frame; last policy 3.9 / 11.5, the pick 9.4 / 8.7 (epoch
+# 93). 5x the updates did not learn the way around within 1M frames. Retired.
+RETIRED_GOAL_CANDIDATES["goal_buffer_budget"] = [*RETIRED_GOAL_CANDIDATES["goal_buffer_split"],
+                                                 *RETIRED_GOAL_CANDIDATES["goal_budget"]]
+# The open SafetyPointGoal1 candidates: none.
+GOAL_CANDIDATES: dict[str, list[str]] = {}
 FRAMES = 500_000
 # (algo, task, candidates, frames): the groups whose delivered policy missed the limit in
 # results/table1 and results/safe_sound, the largest misses first (the order of a seed's runs).

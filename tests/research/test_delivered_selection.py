@@ -244,20 +244,20 @@ def test_the_preset_is_the_rules_choice():
     assert validate(composed).algo.lagrangian_eval_window == 0  # aim's window is not part of it
 
 
-def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
+def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path, monkeypatch):
     """goal_budget's run (retired after SAC-Lag seed 1) composes and validates, with 5x the
     gradient steps per frame and lambda's rate per update cut by as much (lambda updates once
-    per gradient step under experiment=safe); the queue holds the open SafetyPointGoal1
-    candidate's runs at 1M frames and no retired one's, each candidate composes to what its
-    note says, and `--runs` queues only the runs its glob names."""
+    per gradient step under experiment=safe); the queue holds no retired SafetyPointGoal1
+    candidate's runs, and an open one's four at 1M frames, last; each candidate composes to what
+    its note says, and `--runs` queues only the runs its glob names."""
     from s3rl_torchrl.trainer import validate
     from tests.conftest import compose_train
 
     selection = _script("selection")
-    assert set(selection.GOAL_CANDIDATES) == {"goal_buffer_budget"}
+    assert selection.GOAL_CANDIDATES == {}
     assert set(selection.RETIRED_GOAL_CANDIDATES) == {
         "goal_mean", "goal_bound", "goal_split", "goal_budget", "goal_horizon20", "goal_horizon10",
-        "goal_buffer", "goal_buffer_split"}
+        "goal_buffer", "goal_buffer_split", "goal_buffer_budget"}
     task = ["task=SafetyPointGoal1-v0", "algo=sac_lag", "seed=1", "collector.total_frames=1000000"]
     preset = validate(compose_train("experiment=safe", *task))
     budget = validate(compose_train(
@@ -267,17 +267,22 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert budget.algo.lagrangian_lr * budget.algo.update_per_step == pytest.approx(
         preset.algo.lagrangian_lr * preset.algo.update_per_step)
     jobs = list(selection.jobs(tmp_path))
+    assert not [run_dir for run_dir, _ in jobs if "SafetyPointGoal1" in str(run_dir)]
+    # An open candidate (the CASES hold the dict itself) queues four runs, SAC-Lag seed 1 first,
+    # after every margin/aim run.
+    monkeypatch.setitem(selection.GOAL_CANDIDATES, "goal_open", ["algo.gamma=0.98"])
+    opened = list(selection.jobs(tmp_path))
     goal = {run_dir.relative_to(tmp_path).as_posix(): overrides
-            for run_dir, overrides in jobs if "SafetyPointGoal1" in str(run_dir)}
-    # the open candidate's four runs, SAC-Lag seed 1 first, after every margin/aim run
-    assert list(goal) == [f"goal_buffer_budget/{algo}_SafetyPointGoal1-v0/seed{seed}"
+            for run_dir, overrides in opened if "SafetyPointGoal1" in str(run_dir)}
+    assert list(goal) == [f"goal_open/{algo}_SafetyPointGoal1-v0/seed{seed}"
                           for seed in (1, 2) for algo in ("sac_lag", "s3rl")]
-    assert [run_dir for run_dir, _ in jobs][-4:] == [tmp_path / name for name in goal]
-    assert all("collector.total_frames=1000000" in overrides for overrides in goal.values())
-    open_one = validate(compose_train(
-        "experiment=safe", *task, *selection.GOAL_CANDIDATES["goal_buffer_budget"]))
-    assert (open_one.algo.buffer_size, open_one.algo.cost_target_read, open_one.algo.update_per_step,
-            open_one.algo.lagrangian_lr) == (1_000_000, "mean", 1.0, budget.algo.lagrangian_lr)
+    assert [run_dir for run_dir, _ in opened][-4:] == [tmp_path / name for name in goal]
+    assert all("collector.total_frames=1000000" in overrides and "algo.gamma=0.98" in overrides
+               for overrides in goal.values())
+    eleventh = validate(compose_train(
+        "experiment=safe", *task, *selection.RETIRED_GOAL_CANDIDATES["goal_buffer_budget"]))
+    assert (eleventh.algo.buffer_size, eleventh.algo.cost_target_read, eleventh.algo.update_per_step,
+            eleventh.algo.lagrangian_lr) == (1_000_000, "mean", 1.0, budget.algo.lagrangian_lr)
     retired = selection.RETIRED_GOAL_CANDIDATES
     for name, gamma, buffer in (("goal_horizon20", 0.95, 100_000),
                                 ("goal_horizon10", 0.9, 100_000), ("goal_buffer", 0.99, 1_000_000)):
@@ -297,7 +302,8 @@ def test_the_goal_budget_keeps_lambdas_rate_per_frame(tmp_path):
     assert picked == [tmp_path / "margin" / f"sac_lag_{task}" / "seed1"
                       for task in ("SafetyPointCircle1-v0", "SafetySwimmerVelocity-v1",
                                    "SafetyBallRun-v0")]
-    assert len(jobs) == 2 * 2 * 7 + 4  # margin/aim on seven cases, the goal candidate's four
+    assert len(jobs) == 2 * 2 * 7  # margin/aim on seven cases
+    assert len(opened) == 2 * 2 * 7 + 4
 
 
 def test_goal_windows_count_the_three_epoch_windows_on_target_by_hand():
