@@ -2,12 +2,15 @@
 windows of 3 consecutive epochs (3 x 2 evaluation episodes) past lambda's warm-up whose mean
 evaluation reward is >= 20 at a mean evaluation cost <= the limit, and the most reward of a
 window within the limit (research/2026-12-07-pointgoal1-horizon.md, "What ten settings say").
-With ``--spans``, the means over spans of frames instead (the note's 3M tables):
+With ``--spans``, the means over spans of frames instead (the note's 3M tables); with ``--held``,
+how long each run held the goal while lambda was on and at what training cost (the note's "goal
+held until" and "training cost while held" columns, as in the critic selection's round 4):
 
     python research/delivered_policy/goal_windows.py research/results/delivered_selection \
         results/table1_v2
     python research/delivered_policy/goal_windows.py research/results/goal_3m \
         --spans 0.8-1,1-1.5,1.5-2,2-2.5,2.5-3
+    python research/delivered_policy/goal_windows.py research/results/delivered_selection --held
 """
 
 from __future__ import annotations
@@ -108,6 +111,51 @@ def span_rows(roots: list[Path], spans: list[tuple[float, float]]) -> list[list[
     return table
 
 
+HELD_REWARD = 15.0  # a 3-epoch mean evaluation reward the note counts as still reaching goals
+
+
+def goal_held(
+    frames, lagrangian, eval_reward, train_reward, train_cost, *, held_reward: float = HELD_REWARD,
+    reward_target: float = REWARD_TARGET, width: int = WIDTH,
+) -> tuple[int, float, float, float] | None:
+    """(the last frame with lambda > 0 whose trailing ``width``-epoch mean evaluation reward is
+    >= ``held_reward``, lambda there, the mean training cost over the epochs with lambda > 0 up
+    to it, the lowest training cost of those epochs whose training reward is >= ``reward_target``
+    (nan if none)); None if the goal was never held while lambda was on."""
+    frames, lam, eval_reward, train_reward, train_cost = (
+        np.asarray(a, dtype=float)
+        for a in (frames, lagrangian, eval_reward, train_reward, train_cost)
+    )
+    if frames.size < width:
+        return None
+    trailing = np.full(frames.size, np.nan)
+    trailing[width - 1:] = np.convolve(eval_reward, np.ones(width) / width, mode="valid")
+    held = np.flatnonzero((lam > 0) & (trailing >= held_reward))
+    if held.size == 0:
+        return None
+    last = int(held[-1])
+    on = (lam > 0) & (np.arange(frames.size) <= last)
+    rewarded = on & (train_reward >= reward_target)
+    lowest = float(train_cost[rewarded].min()) if rewarded.any() else float("nan")
+    return int(frames[last]), float(lam[last]), float(train_cost[on].mean()), lowest
+
+
+def held_rows(roots: list[Path]) -> list[list[str]]:
+    table = []
+    for root in roots:
+        for run in find_runs(root):
+            if run.task != TASK:
+                continue
+            frames, lam = run.column("lagrangian")
+            series = [run.column(column)[1] for column in ("eval/reward", "train/reward",
+                                                           "train/cost")]
+            held = goal_held(frames, lam, *series)
+            cells = ["–", "–"] if held is None else [
+                f"{held[0] // 1000}k ({held[1]:.2f})", f"{held[2]:.1f} ({held[3]:.1f})"]
+            table.append([str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", *cells])
+    return table
+
+
 def parse_spans(text: str) -> list[tuple[float, float]]:
     """``"0.8-1,1-1.5"`` (millions of frames) -> ``[(800000.0, 1000000.0), (1e6, 1.5e6)]``."""
     spans = []
@@ -126,7 +174,15 @@ def main() -> None:
     parser.add_argument("roots", nargs="+", type=Path, help="directories of exported runs")
     parser.add_argument("--spans", default=None,
                         help="means over these spans of frames instead, in millions: 0.8-1,1-1.5")
+    parser.add_argument("--held", action="store_true",
+                        help="how long each run held the goal while lambda was on instead")
     args = parser.parse_args()
+    if args.held:
+        header = ["run", "frames", f"goal held until (lambda): last 3-epoch mean eval reward >= "
+                  f"{HELD_REWARD:g}", "training cost while held (lowest epoch with training "
+                  f"reward >= {REWARD_TARGET:g})"]
+        print("\n".join(markdown(header, held_rows(args.roots))))
+        return
     if args.spans is not None:
         header = ["run", "frames", *(name for name, _, _ in SPAN_CELLS)]
         print("\n".join(markdown(header, span_rows(args.roots, parse_spans(args.spans)))))

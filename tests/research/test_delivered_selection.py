@@ -344,3 +344,33 @@ def test_goal_windows_span_means_by_hand_and_on_the_3m_runs():
     assert ["goal_3m/goal_buffer_split/sac_lag_SafetyPointGoal1-v0/seed1", "2.5-3M", "15.3 / 10.1",
             "17.0 / 15.1", "0.56", "0.64 / 1.68", "1.19 / 1.62"] in rows
     assert {row[1] for row in rows} == {"2.5-3M"}
+
+
+def test_goal_held_by_hand():
+    goal_held = _script("goal_windows").goal_held
+    # Lambda is off for the first epoch; the trailing 3-epoch mean evaluation reward is
+    # (nan, nan, 20, 16, 12, 9): the goal is held at 30k and 40k, last at 40k (lambda 0.2).
+    frames = [10_000, 20_000, 30_000, 40_000, 50_000, 60_000]
+    lam = [0.0, 0.1, 0.1, 0.2, 0.3, 0.4]
+    eval_reward = [24.0, 21.0, 15.0, 12.0, 9.0, 6.0]
+    train_reward = [25.0, 22.0, 19.0, 20.0, 5.0, 1.0]
+    train_cost = [90.0, 40.0, 30.0, 20.0, 10.0, 0.0]
+    # Training cost over the lambda > 0 epochs up to 40k: (40 + 30 + 20) / 3; the lowest of
+    # those with a training reward >= 20: 20 (at 40k; 90 at 10k had lambda off).
+    assert goal_held(frames, lam, eval_reward, train_reward, train_cost) == (40_000, 0.2, 30.0,
+                                                                             20.0)
+    # Never held while lambda was on: None; held without a rewarded epoch: nan.
+    assert goal_held(frames, [0.0] * 6, eval_reward, train_reward, train_cost) is None
+    held = goal_held(frames, lam, eval_reward, [0.0] * 6, train_cost)
+    assert held[:3] == (40_000, 0.2, 30.0) and held[3] != held[3]
+
+
+def test_goal_held_gives_the_notes_columns():
+    """research/2026-12-07-pointgoal1-horizon.md's "goal held until" and "training cost while
+    held" cells, from the exported runs."""
+    rows = {row[0].split("/")[1]: row[2:] for row in _script("goal_windows").held_rows([RESULTS])}
+    note = (ROOT / "research" / "2026-12-07-pointgoal1-horizon.md").read_text()
+    for candidate in ("goal_horizon20", "goal_horizon10", "goal_buffer", "goal_buffer_split",
+                      "goal_buffer_budget"):
+        held, cost = rows[candidate]
+        assert f"| `{candidate}` | sac_lag seed 1 | 1000k | {held} | {cost} |" in note
