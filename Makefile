@@ -43,8 +43,9 @@ lint: $(STAMP)
 	$(BIN)/ruff check s3rl_torchrl recipes tests benchmarks docs research
 
 # Every test (CI runs this); test-fast leaves out the ones marked slow (end-to-end runs).
+# --durations: the 20 slowest tests close the log, to keep the suite under its ~15 minutes.
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q -n $(WORKERS) $(ARGS)
+	$(BIN)/python -m pytest -q -n $(WORKERS) --durations=20 $(ARGS)
 
 test-fast: $(STAMP) lint
 	$(BIN)/python -m pytest -q -n $(WORKERS) -m "not slow" $(ARGS)
@@ -159,6 +160,10 @@ research-report: $(STAMP)
 	$(BIN)/python docs/update_table1.py --research
 	$(BIN)/python research/delivered_policy/summarise.py $(R)/delivered_selection \
 		--out research/delivered_policy/selection.md
+	$(BIN)/python research/delivered_policy/delivery_rules.py summarise $(R)/delivery_rules \
+		--out research/delivered_policy/delivery_rules.md
+	$(BIN)/python research/delivered_policy/task_targets.py summarise $(R)/task_targets \
+		--out research/delivered_policy/task_targets.md
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache .ruff_cache
