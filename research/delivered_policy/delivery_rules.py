@@ -23,7 +23,6 @@ runs copied already skipped.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -34,7 +33,7 @@ from s3rl_torchrl.report.runs import find_runs
 from s3rl_torchrl.trainer.evaluation import pick_delivered
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
-from selection import run_queue  # noqa: E402
+from selection import QUEUED, run_or_summarise  # noqa: E402
 from summarise import committed_rewards, tail  # noqa: E402
 
 FRAMES = 1_000_000
@@ -78,10 +77,7 @@ def jobs(out: Path):
                 f"seed={seed}",
                 f"collector.total_frames={FRAMES}",
                 *RECORDING,
-                "threads=1",
-                "save_interval=2",
-                "logger.progress_bar=false",
-                "resume=auto",
+                *QUEUED,
                 f"hydra.run.dir={run_dir}",
             ]
 
@@ -183,24 +179,7 @@ def choice(tally: dict[str, dict]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="the queue")
-    run.add_argument("--out", type=Path, required=True)
-    run.add_argument("--export", type=Path, default=None)
-    run.add_argument("--workers", type=int, default=2)
-    table = sub.add_parser("summarise", help="the table and the rule's choice")
-    table.add_argument("root", type=Path)
-    table.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args()
-    if args.command == "run":
-        run_queue(list(jobs(args.out)), args.out, args.export, args.workers)
-        return
-    text = summarise(args.root)
-    if args.out is None:
-        print(text, end="")
-    else:
-        args.out.write_text(text)
+    run_or_summarise(__doc__.splitlines()[0], jobs, summarise)
 
 
 if __name__ == "__main__":

@@ -139,6 +139,9 @@ CASES = [
 ]
 SEEDS = [1, 2]
 DELIVERY = ["eval.delivery_epochs=10", "eval.delivery_episodes=5"]
+# Every queued run (this round's and the later rounds' scripts): one thread, since two share the
+# cores; checkpoints every 2 epochs and `resume=auto`, so the same command continues it.
+QUEUED = ["threads=1", "save_interval=2", "logger.progress_bar=false", "resume=auto"]
 
 
 def jobs(out: Path):
@@ -160,10 +163,7 @@ def jobs(out: Path):
                 f"collector.total_frames={frames}",
                 *overrides,
                 *DELIVERY,
-                "threads=1",
-                "save_interval=2",
-                "logger.progress_bar=false",
-                "resume=auto",
+                *QUEUED,
                 f"hydra.run.dir={run_dir}",
             ]
 
@@ -199,6 +199,30 @@ def run_queue(queue, out: Path, export: Path | None, workers: int) -> None:
     with ThreadPoolExecutor(workers) as pool:
         for line in pool.map(lambda job: run(job, out, export), queue):
             print(line, flush=True)
+
+
+def run_or_summarise(description: str, jobs, summarise) -> None:
+    """The command line of a later round's script: ``run --out <runs> [--export <copies>]`` runs
+    ``jobs(out)`` through :func:`run_queue`; ``summarise <root> [--out <file>]`` prints or writes
+    ``summarise(root)``."""
+    parser = argparse.ArgumentParser(description=description)
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="the queue")
+    run.add_argument("--out", type=Path, required=True)
+    run.add_argument("--export", type=Path, default=None)
+    run.add_argument("--workers", type=int, default=2)
+    table = sub.add_parser("summarise", help="the round's table and its rule's reading")
+    table.add_argument("root", type=Path)
+    table.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    if args.command == "run":
+        run_queue(list(jobs(args.out)), args.out, args.export, args.workers)
+        return
+    text = summarise(args.root)
+    if args.out is None:
+        print(text, end="")
+    else:
+        args.out.write_text(text)
 
 
 def main() -> None:

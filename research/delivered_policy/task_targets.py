@@ -18,7 +18,6 @@ runs copied already skipped.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -27,7 +26,7 @@ import numpy as np
 from s3rl_torchrl.report.runs import find_runs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
-from selection import run_queue  # noqa: E402
+from selection import QUEUED, run_or_summarise  # noqa: E402
 from summarise import committed_rewards, markdown, tail  # noqa: E402
 
 FRAMES = 1_000_000
@@ -53,10 +52,7 @@ def jobs(out: Path):
                     f"seed={seed}",
                     f"collector.total_frames={FRAMES}",
                     *overrides,
-                    "threads=1",
-                    "save_interval=2",
-                    "logger.progress_bar=false",
-                    "resume=auto",
+                    *QUEUED,
                     f"hydra.run.dir={run_dir}",
                 ]
 
@@ -117,24 +113,7 @@ def verdict(name: str, runs, reference: dict[tuple[str, str], float]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="the queue")
-    run.add_argument("--out", type=Path, required=True)
-    run.add_argument("--export", type=Path, default=None)
-    run.add_argument("--workers", type=int, default=2)
-    table = sub.add_parser("summarise", help="the table and the rule's verdict")
-    table.add_argument("root", type=Path)
-    table.add_argument("--out", type=Path, default=None)
-    args = parser.parse_args()
-    if args.command == "run":
-        run_queue(list(jobs(args.out)), args.out, args.export, args.workers)
-        return
-    text = summarise(args.root)
-    if args.out is None:
-        print(text, end="")
-    else:
-        args.out.write_text(text)
+    run_or_summarise(__doc__.splitlines()[0], jobs, summarise)
 
 
 if __name__ == "__main__":
