@@ -91,9 +91,15 @@ def verdict(name: str, runs, reference: dict[tuple[str, str], float]) -> str:
     round (both algos, seeds 1 and 2) is within the limit on its reported episodes and, per
     algo, the median of the picks' reward over Table 1's mean reward is at least 0.85."""
     expected = len(SEEDS) * len(ALGOS)
-    if len(runs) < expected:  # the rule reads the whole round, never a part of it
-        return f"The rule's verdict on {name}: not yet ({len(runs)} of {expected} runs finished)."
     over = [run for run in runs if run.final["delivered"]["cost_mean"] > run.cost_limit]
+    if len(runs) < expected:
+        # A part of the round decides nothing but a miss: a pick over the limit stays over it
+        # whatever the other runs give.
+        if over:
+            return (f"The rule's verdict on {name}: it misses ({len(over)} of the {len(runs)} "
+                    f"finished picks over the limit; every one of the {expected} must be within, "
+                    f"so the other {expected - len(runs)} runs cannot change it).")
+        return f"The rule's verdict on {name}: not yet ({len(runs)} of {expected} runs finished)."
     kept = {
         algo: float(np.median([run.final["delivered"]["reward_mean"] / reference[(algo, run.task)]
                                for run in runs if run.algo == algo]))

@@ -62,8 +62,12 @@ def test_the_verdict_follows_the_rule_by_hand(targets):
     assert targets.verdict("c", short, reference) == (
         "The rule's verdict on c: it misses (reward kept below 0.85 for s3rl; reward kept: "
         "sac_lag 1.00, s3rl 0.84).")
-    # A part of the round is never judged.
+    # A part of the round decides only a miss: a pick over the limit, never a short reward.
     assert "not yet (3 of 4 runs finished)" in targets.verdict("c", runs[:3], reference)
+    assert "not yet (1 of 4 runs finished)" in targets.verdict("c", short[3:], reference)
+    assert targets.verdict("c", [runs[0], over[3]], reference) == (
+        "The rule's verdict on c: it misses (1 of the 2 finished picks over the limit; every one "
+        "of the 4 must be within, so the other 2 runs cannot change it).")
 
 
 def test_the_committed_table_is_the_exported_runs(targets):
