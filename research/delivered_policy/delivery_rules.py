@@ -33,7 +33,7 @@ from s3rl_torchrl.report.runs import find_runs
 from s3rl_torchrl.trainer.evaluation import pick_delivered
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
-from selection import QUEUED, run_or_summarise  # noqa: E402
+from selection import queued_run, run_or_summarise  # noqa: E402
 from summarise import committed_rewards, tail  # noqa: E402
 
 FRAMES = 1_000_000
@@ -70,16 +70,7 @@ def jobs(out: Path):
     for seed in SEEDS:
         for algo, task in GROUPS:
             run_dir = out / f"{algo}_{task}" / f"seed{seed}"
-            yield run_dir, [
-                "experiment=safe",
-                f"task={task}",
-                f"algo={algo}",
-                f"seed={seed}",
-                f"collector.total_frames={FRAMES}",
-                *RECORDING,
-                *QUEUED,
-                f"hydra.run.dir={run_dir}",
-            ]
+            yield queued_run(run_dir, task, algo, seed, FRAMES, *RECORDING)
 
 
 # ----------------------------------------------------------------------------- the rules

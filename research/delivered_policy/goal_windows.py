@@ -55,19 +55,24 @@ def target_windows(
     return mean_reward.size, hits, float(mean_reward[best]), int(frames[best + width - 1])
 
 
-def rows(roots: list[Path]) -> list[list[str]]:
-    table = []
+def goal_runs(roots: list[Path]):
+    """``(root, run)`` for every SafetyPointGoal1 run exported under each of ``roots``."""
     for root in roots:
         for run in find_runs(root):
-            if run.task != TASK:
-                continue
-            frames, reward = run.column("eval/reward")
-            _, cost = run.column("eval/cost")
-            windows, hits, best, at = target_windows(frames, reward, cost, run.cost_limit)
-            table.append([
-                str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", str(windows),
-                str(hits), "–" if at is None else f"{best:.1f} ({at // 1000}k)",
-            ])
+            if run.task == TASK:
+                yield root, run
+
+
+def rows(roots: list[Path]) -> list[list[str]]:
+    table = []
+    for root, run in goal_runs(roots):
+        frames, reward = run.column("eval/reward")
+        _, cost = run.column("eval/cost")
+        windows, hits, best, at = target_windows(frames, reward, cost, run.cost_limit)
+        table.append([
+            str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", str(windows),
+            str(hits), "–" if at is None else f"{best:.1f} ({at // 1000}k)",
+        ])
     return table
 
 
@@ -92,22 +97,19 @@ def span_means(frames, values, low: float, high: float) -> float | None:
 
 def span_rows(roots: list[Path], spans: list[tuple[float, float]]) -> list[list[str]]:
     table = []
-    for root in roots:
-        for run in find_runs(root):
-            if run.task != TASK:
-                continue
-            series = {column: run.column(column)
-                      for _, columns, _ in SPAN_CELLS for column in columns}
-            for low, high in spans:
-                cells = []
-                for _, columns, digits in SPAN_CELLS:
-                    means = [span_means(*series[column], low, high) for column in columns]
-                    if None in means:
-                        break
-                    cells.append(" / ".join(f"{mean:.{digits}f}" for mean in means))
-                else:
-                    table.append([str(run.path.relative_to(root.parent)),
-                                  f"{low / 1e6:g}-{high / 1e6:g}M", *cells])
+    for root, run in goal_runs(roots):
+        series = {column: run.column(column)
+                  for _, columns, _ in SPAN_CELLS for column in columns}
+        for low, high in spans:
+            cells = []
+            for _, columns, digits in SPAN_CELLS:
+                means = [span_means(*series[column], low, high) for column in columns]
+                if None in means:
+                    break
+                cells.append(" / ".join(f"{mean:.{digits}f}" for mean in means))
+            else:
+                table.append([str(run.path.relative_to(root.parent)),
+                              f"{low / 1e6:g}-{high / 1e6:g}M", *cells])
     return table
 
 
@@ -142,17 +144,14 @@ def goal_held(
 
 def held_rows(roots: list[Path]) -> list[list[str]]:
     table = []
-    for root in roots:
-        for run in find_runs(root):
-            if run.task != TASK:
-                continue
-            frames, lam = run.column("lagrangian")
-            series = [run.column(column)[1] for column in ("eval/reward", "train/reward",
-                                                           "train/cost")]
-            held = goal_held(frames, lam, *series)
-            cells = ["–", "–"] if held is None else [
-                f"{held[0] // 1000}k ({held[1]:.2f})", f"{held[2]:.1f} ({held[3]:.1f})"]
-            table.append([str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", *cells])
+    for root, run in goal_runs(roots):
+        frames, lam = run.column("lagrangian")
+        series = [run.column(column)[1] for column in ("eval/reward", "train/reward",
+                                                       "train/cost")]
+        held = goal_held(frames, lam, *series)
+        cells = ["–", "–"] if held is None else [
+            f"{held[0] // 1000}k ({held[1]:.2f})", f"{held[2]:.1f} ({held[3]:.1f})"]
+        table.append([str(run.path.relative_to(root.parent)), f"{run.frames // 1000}k", *cells])
     return table
 
 

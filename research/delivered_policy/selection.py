@@ -155,17 +155,22 @@ def jobs(out: Path):
     for seed, (algo, task, candidates, frames) in sorted(itertools.product(SEEDS, CASES), key=order):
         for name, overrides in candidates.items():
             run_dir = out / name / f"{algo}_{task}" / f"seed{seed}"
-            yield run_dir, [
-                "experiment=safe",
-                f"task={task}",
-                f"algo={algo}",
-                f"seed={seed}",
-                f"collector.total_frames={frames}",
-                *overrides,
-                *DELIVERY,
-                *QUEUED,
-                f"hydra.run.dir={run_dir}",
-            ]
+            yield queued_run(run_dir, task, algo, seed, frames, *overrides, *DELIVERY)
+
+
+def queued_run(run_dir: Path, task: str, algo: str, seed: int, frames: int, *overrides: str):
+    """``(run_dir, overrides)``: one `experiment=safe` run of this round or a later one, with
+    its own ``overrides`` and the queue's settings (``QUEUED``), written to ``run_dir``."""
+    return run_dir, [
+        "experiment=safe",
+        f"task={task}",
+        f"algo={algo}",
+        f"seed={seed}",
+        f"collector.total_frames={frames}",
+        *overrides,
+        *QUEUED,
+        f"hydra.run.dir={run_dir}",
+    ]
 
 
 def run(job, out: Path, export: Path | None = None) -> str:

@@ -3,7 +3,7 @@ research/2026-12-08-antcircle-target.md states before any of its runs was read.
 
 The preset holds every task's training cost at 0.7 of the limit (`algo.lagrangian_target`), the
 margin its delivered policy needs where that policy costs more than the training episodes. On
-SafetyAntCircle-v0 the deterministic policy costs less than the training episodes, and the
+SafetyAntCircle-v0 Table 1's deterministic policies cost less than its training episodes, and the
 evidence's AntCircle runs kept less than 0.85 of Table 1's reward. The candidate trains it as
 Table 1 did (target 1.0), everything else the preset's, with the preset's delivered pick:
 
@@ -26,7 +26,7 @@ import numpy as np
 from s3rl_torchrl.report.runs import find_runs
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # research/ is not a package
-from selection import QUEUED, run_or_summarise  # noqa: E402
+from selection import queued_run, run_or_summarise  # noqa: E402
 from summarise import committed_rewards, markdown, tail  # noqa: E402
 
 FRAMES = 1_000_000
@@ -45,16 +45,7 @@ def jobs(out: Path):
         for seed in SEEDS:
             for algo in ALGOS:
                 run_dir = out / name / f"{algo}_{task}" / f"seed{seed}"
-                yield run_dir, [
-                    "experiment=safe",
-                    f"task={task}",
-                    f"algo={algo}",
-                    f"seed={seed}",
-                    f"collector.total_frames={FRAMES}",
-                    *overrides,
-                    *QUEUED,
-                    f"hydra.run.dir={run_dir}",
-                ]
+                yield queued_run(run_dir, task, algo, seed, FRAMES, *overrides)
 
 
 def summarise(root: Path) -> str:
